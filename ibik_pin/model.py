@@ -1,0 +1,243 @@
+"""Body models: a Pinocchio model plus the named keypoints and skeleton segments the method needs.
+
+A `BodyModel` says which model frame stands for each keypoint (Pose2Sim names on the human), which
+keypoint pairs are the segments projected into the images (eq. 5), and how thick each segment is
+(for rendering silhouettes). Keypoints that are not at a model joint are added as operational frames.
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from .exceptions import FileFormatError, InputError, UnknownNameError
+
+MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
+HUMAN_URDF_RELATIVE = Path("example-robot-data/robots/human_description/robots/human.urdf")
+
+
+@dataclass
+class BodyModel:
+    """A kinematic model with the keypoints and segments of the image criterion.
+
+    Attributes:
+        model: the Pinocchio model.
+        keypoints: keypoint name -> model frame name.
+        segments: pairs of keypoint names; each is a rigid segment between two keypoints.
+        segment_radii: radius [m] of each segment's capsule, same order as `segments`.
+        end_effectors: keypoints that are usually known targets (the rest are estimated).
+    """
+
+    model: pin.Model
+    keypoints: dict[str, str]
+    segments: list[tuple[str, str]]
+    segment_radii: np.ndarray
+    end_effectors: list[str] = field(default_factory=list)
+
+    def frame_id(self, keypoint: str) -> int:
+        """Model frame index of a keypoint; UnknownNameError lists the known keypoints."""
+        if keypoint not in self.keypoints:
+            raise UnknownNameError(
+                f"keypoint {keypoint!r} is not in model {self.model.name!r}; known keypoints: "
+                + ", ".join(self.keypoints)
+            )
+        return self.model.getFrameId(self.keypoints[keypoint])
+
+    def frame_ids(self, keypoints: list[str]) -> np.ndarray:
+        """Frame indices of several keypoints, shape (K,)."""
+        return np.array([self.frame_id(name) for name in keypoints], dtype=int)
+
+    @property
+    def segment_frame_ids(self) -> np.ndarray:
+        """Frame indices of segment ends, shape (S, 2)."""
+        return np.array([[self.frame_id(a), self.frame_id(b)] for a, b in self.segments], dtype=int)
+
+
+def frame_id(model: pin.Model, frame_name: str) -> int:
+    """Index of a model frame; UnknownNameError lists the available frames."""
+    if not model.existFrame(frame_name):
+        names = ", ".join(frame.name for frame in model.frames)
+        raise UnknownNameError(
+            f"frame {frame_name!r} does not exist in model {model.name!r}; available frames: {names}"
+        )
+    return model.getFrameId(frame_name)
+
+
+def load_urdf(path: str | Path, free_flyer: bool = False) -> pin.Model:
+    """Load a URDF file into a Pinocchio model.
+
+    Args:
+        path: the URDF file.
+        free_flyer: add a 6-DOF free-flyer root joint (floating base).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileFormatError(f"URDF file {str(path)!r} does not exist")
+    try:
+        if free_flyer:
+            return pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
+        return pin.buildModelFromUrdf(str(path))
+    except (RuntimeError, ValueError) as error:
+        raise FileFormatError(f"URDF file {str(path)!r} cannot be parsed: {error}") from error
+
+
+def human_urdf_path() -> Path:
+    """Path of example-robot-data's human URDF inside the installed package (no network)."""
+    for entry in sys.path:
+        candidate = Path(entry) / "cmeel.prefix" / "share" / HUMAN_URDF_RELATIVE
+        if candidate.is_file():
+            return candidate
+    raise FileFormatError(
+        "example-robot-data's human.urdf was not found under any 'cmeel.prefix/share' of sys.path; "
+        "install the package with: pip install example-robot-data"
+    )
+
+
+def add_keypoint_frame(model: pin.Model, name: str, parent_joint: str, offset: np.ndarray) -> None:
+    """Add an operational frame `name` at `offset` [m] in the frame of joint `parent_joint`."""
+    if not model.existJointName(parent_joint):
+        raise UnknownNameError(
+            f"joint {parent_joint!r} does not exist in model {model.name!r}; joints: "
+            + ", ".join(model.names)
+        )
+    joint_index = model.getJointId(parent_joint)
+    placement = pin.SE3(np.eye(3), np.asarray(offset, dtype=float))
+    parent_frame = model.getFrameId(parent_joint)
+    model.addFrame(pin.Frame(name, joint_index, parent_frame, placement, pin.FrameType.OP_FRAME))
+
+
+# Pose2Sim keypoint -> (parent joint, offset [m] in that joint's frame) on example-robot-data's
+# human (ISB axes: X forward, Y up, Z to the right; the model's left side is at negative Z).
+_HUMAN_KEYPOINTS: dict[str, tuple[str, tuple[float, float, float]]] = {
+    "Hip": ("root_joint", (0.0, 0.0, 0.0)),
+    "LHip": ("left_hip_Z", (0.0, 0.0, 0.0)),
+    "LKnee": ("left_knee_Z", (0.0, 0.0, 0.0)),
+    "LAnkle": ("left_ankle_Z", (0.0, 0.0, 0.0)),
+    "LBigToe": ("left_ankle_X", (0.15, -0.07, 0.01)),
+    "LSmallToe": ("left_ankle_X", (0.13, -0.07, -0.04)),
+    "LHeel": ("left_ankle_X", (-0.05, -0.07, 0.0)),
+    "RHip": ("right_hip_Z", (0.0, 0.0, 0.0)),
+    "RKnee": ("right_knee_Z", (0.0, 0.0, 0.0)),
+    "RAnkle": ("right_ankle_Z", (0.0, 0.0, 0.0)),
+    "RBigToe": ("right_ankle_X", (0.15, -0.07, -0.01)),
+    "RSmallToe": ("right_ankle_X", (0.13, -0.07, 0.04)),
+    "RHeel": ("right_ankle_X", (-0.05, -0.07, 0.0)),
+    "Neck": ("middle_cervical_Z", (0.0, 0.0, 0.0)),
+    "Head": ("middle_cervical_Y", (0.0, 0.22, 0.0)),
+    "Nose": ("middle_cervical_Y", (0.1, 0.12, 0.0)),
+    "LShoulder": ("left_shoulder_Z", (0.0, 0.0, 0.0)),
+    "LElbow": ("left_elbow_Z", (0.0, 0.0, 0.0)),
+    "LWrist": ("left_wrist_Z", (0.0, 0.0, 0.0)),
+    "LHand": ("left_wrist_X", (0.0, -0.12, 0.0)),
+    "RShoulder": ("right_shoulder_Z", (0.0, 0.0, 0.0)),
+    "RElbow": ("right_elbow_Z", (0.0, 0.0, 0.0)),
+    "RWrist": ("right_wrist_Z", (0.0, 0.0, 0.0)),
+    "RHand": ("right_wrist_X", (0.0, -0.12, 0.0)),
+}
+
+# (segment, capsule radius [m]): limbs, trunk and head, the parts a silhouette really covers.
+_HUMAN_SEGMENTS: list[tuple[tuple[str, str], float]] = [
+    (("Hip", "Neck"), 0.13),
+    (("LHip", "RHip"), 0.09),
+    (("LShoulder", "RShoulder"), 0.06),
+    (("Neck", "Head"), 0.08),
+    (("LHip", "LKnee"), 0.07),
+    (("LKnee", "LAnkle"), 0.05),
+    (("LHeel", "LBigToe"), 0.035),
+    (("RHip", "RKnee"), 0.07),
+    (("RKnee", "RAnkle"), 0.05),
+    (("RHeel", "RBigToe"), 0.035),
+    (("LShoulder", "LElbow"), 0.045),
+    (("LElbow", "LWrist"), 0.035),
+    (("LWrist", "LHand"), 0.035),
+    (("RShoulder", "RElbow"), 0.045),
+    (("RElbow", "RWrist"), 0.035),
+    (("RWrist", "RHand"), 0.035),
+]
+
+HUMAN_END_EFFECTORS = ["Hip", "LAnkle", "RAnkle", "LWrist", "RWrist", "Head"]
+
+
+def load_human(urdf_path: str | Path | None = None, free_flyer: bool = True) -> BodyModel:
+    """The whole-body human: example-robot-data's 36-DOF ISB model with Pose2Sim keypoints.
+
+    Args:
+        urdf_path: another URDF with the same joint names; default the installed human.urdf.
+        free_flyer: add the 6-DOF floating base (43 coordinates, 42 velocities).
+    """
+    model = load_urdf(urdf_path or human_urdf_path(), free_flyer=free_flyer)
+    model.name = "human"
+    for name, (joint, offset) in _HUMAN_KEYPOINTS.items():
+        if joint == "root_joint" and not free_flyer:
+            joint = "universe"
+        add_keypoint_frame(model, name, joint, np.array(offset))
+    return BodyModel(
+        model=model,
+        keypoints={name: name for name in _HUMAN_KEYPOINTS},
+        segments=[segment for segment, _ in _HUMAN_SEGMENTS],
+        segment_radii=np.array([radius for _, radius in _HUMAN_SEGMENTS]),
+        end_effectors=list(HUMAN_END_EFFECTORS),
+    )
+
+
+def load_planar_chain() -> BodyModel:
+    """The paper's planar chain (Figs. 6-8): 4 segments of 0.25 m, 4 revolute joints about Z."""
+    model = load_urdf(MODELS_DIR / "planar_chain.urdf")
+    keypoints = {f"joint_{i}": f"joint_{i}" for i in range(1, 5)}
+    keypoints["end_effector"] = "end_effector"
+    names = list(keypoints)
+    return BodyModel(
+        model=model,
+        keypoints=keypoints,
+        segments=list(zip(names[:-1], names[1:])),
+        segment_radii=np.full(4, 0.02),
+        end_effectors=["end_effector"],
+    )
+
+
+def load_arm() -> BodyModel:
+    """The paper's 3D arm: shoulder and elbow of 3 DOF each, end effector at the wrist."""
+    model = load_urdf(MODELS_DIR / "arm.urdf")
+    return BodyModel(
+        model=model,
+        keypoints={"Shoulder": "shoulder_Z", "Elbow": "elbow_Z", "Wrist": "wrist"},
+        segments=[("Shoulder", "Elbow"), ("Elbow", "Wrist")],
+        segment_radii=np.array([0.045, 0.035]),
+        end_effectors=["Wrist"],
+    )
+
+
+def load_leg() -> BodyModel:
+    """The paper's 3D leg: hip and knee of 3 DOF each, end effector at the ankle."""
+    model = load_urdf(MODELS_DIR / "leg.urdf")
+    return BodyModel(
+        model=model,
+        keypoints={"Hip": "hip_Z", "Knee": "knee_Z", "Ankle": "ankle"},
+        segments=[("Hip", "Knee"), ("Knee", "Ankle")],
+        segment_radii=np.array([0.07, 0.05]),
+        end_effectors=["Ankle"],
+    )
+
+
+def set_segment_length(model: pin.Model, joint_name: str, length: float) -> None:
+    """Scale the placement of `joint_name` in its parent so that it lies `length` [m] away.
+
+    The direction of the joint's offset from its parent joint is kept; frames attached to the
+    parent are not moved.
+    """
+    if length <= 0 or not np.isfinite(length):
+        raise InputError(f"segment length for joint {joint_name!r} must be positive, got {length}")
+    joint_index = model.getJointId(joint_name)
+    if joint_index >= model.njoints:
+        raise UnknownNameError(f"joint {joint_name!r} does not exist in model {model.name!r}")
+    offset = model.jointPlacements[joint_index].translation
+    norm = np.linalg.norm(offset)
+    if norm == 0:
+        raise InputError(f"joint {joint_name!r} has no offset from its parent: it cannot be scaled")
+    placement = model.jointPlacements[joint_index].copy()
+    placement.translation = offset * (length / norm)
+    model.jointPlacements[joint_index] = placement

@@ -1,0 +1,199 @@
+"""What every solver shares: levels of tasks in, one step out, and the iteration loop.
+
+`levels` is a list of priority levels, highest first; each level is a list of tasks. A level holds
+either least-squares tasks (`Task`, rows stacked with their weights) or exactly one `GradientTask`
+(the image criterion). Priority is an argument of the solver, never a property of a task: the same
+task objects run through every solver.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from ..configuration import Configuration
+from ..exceptions import InputError
+from ..limits import JointLimits
+from ..tasks.base import GradientTask, Task
+
+Levels = Sequence[Sequence[Task | GradientTask]]
+
+# Damping lambda of every scheme [units of the task Jacobians, m/rad]: the standing human at its
+# neutral pose is singular (straight knees and elbows) and 1e-3 lets the first steps blow up to
+# tens of radians; 3e-2 converges on whole-body targets in a few steps.
+DEFAULT_DAMPING = 3e-2
+
+
+@dataclass
+class LeastSquaresLevel:
+    """Rows A dq ~= b of the enabled least-squares tasks of one level."""
+
+    A: np.ndarray  # (m, nv)
+    b: np.ndarray  # (m,)
+
+
+@dataclass
+class GradientLevel:
+    """Ascent along a unit direction with a step norm of at most `step_size`."""
+
+    direction: np.ndarray  # (nv,)
+    step_size: float
+    value: float  # the criterion h(q) before the step
+
+
+@dataclass
+class LevelReport:
+    """What one level got at a step.
+
+    Attributes:
+        kind: "tasks" (least squares) or "gradient".
+        residual: |A dq - b| of a least-squares level after the step (NaN for a gradient level).
+        value: the criterion h(q) of a gradient level before the step (NaN otherwise).
+        status: "solved"; "relaxed" (least-squares optimum with a residual: unreachable under the
+            higher levels or the limits); "failed" (the QP backend failed: the level was skipped);
+            "empty" (no enabled task, no null space left, or a zero gradient).
+    """
+
+    kind: str
+    residual: float
+    value: float
+    status: str
+
+
+@dataclass
+class StepResult:
+    dq: np.ndarray  # (nv,)
+    levels: list[LevelReport]
+
+
+@dataclass
+class SolveResult:
+    """The outcome of `Solver.solve`.
+
+    Attributes:
+        q: final configuration, shape (nq,).
+        iterations: steps taken.
+        levels: the reports of the last step, one per level.
+        step_norms: |dq| of every step, shape (iterations,).
+        limit_violation: how far [rad] the final q leaves the joint limits (0 inside, NaN without).
+    """
+
+    q: np.ndarray
+    iterations: int
+    levels: list[LevelReport]
+    step_norms: np.ndarray
+    limit_violation: float = float("nan")
+    failed_levels: int = field(default=0)
+
+
+def build_levels(configuration: Configuration, levels: Levels) -> list:
+    """Evaluate the levels at the configuration: LeastSquaresLevel / GradientLevel / None (empty)."""
+    built = []
+    for index, level in enumerate(levels):
+        tasks = [task for task in level if task.enabled]
+        gradient_tasks = [task for task in tasks if isinstance(task, GradientTask)]
+        if gradient_tasks:
+            if len(tasks) != 1:
+                raise InputError(
+                    f"level {index} mixes a gradient task with other tasks: a gradient task "
+                    "(the image criterion) must be alone in its level"
+                )
+            task = gradient_tasks[0]
+            direction, step_size = task.compute_direction(configuration)
+            built.append(GradientLevel(direction, step_size, task.compute_value(configuration)))
+        elif tasks:
+            rows = [task.compute_linear_system(configuration) for task in tasks]
+            built.append(LeastSquaresLevel(np.vstack([A for A, _ in rows]),
+                                           np.concatenate([b for _, b in rows])))
+        else:
+            built.append(None)
+    return built
+
+
+def least_squares_status(residual: float, b: np.ndarray) -> str:
+    """"solved" when the residual is small next to the requested change (damping alone leaves
+    lambda^2 / (sigma^2 + lambda^2) of it), else "relaxed"."""
+    return "solved" if residual <= 1e-6 + 0.05 * np.linalg.norm(b) else "relaxed"
+
+
+def report_levels(built: list, dq: np.ndarray, failed: set[int] = frozenset()) -> list[LevelReport]:
+    """Reports of every level for the step dq."""
+    reports = []
+    for index, level in enumerate(built):
+        if level is None:
+            reports.append(LevelReport("tasks", float("nan"), float("nan"), "empty"))
+        elif isinstance(level, GradientLevel):
+            status = "failed" if index in failed else ("empty" if level.step_size == 0 else "solved")
+            reports.append(LevelReport("gradient", float("nan"), level.value, status))
+        else:
+            residual = float(np.linalg.norm(level.A @ dq - level.b))
+            status = "failed" if index in failed else least_squares_status(residual, level.b)
+            reports.append(LevelReport("tasks", residual, float("nan"), status))
+    return reports
+
+
+class Solver(ABC):
+    """A scheme that turns levels into a step dq; `solve` iterates it.
+
+    Attributes:
+        limits: joint limits, or None. The QP enforces them as constraints at every level; the
+            projection schemes clip the configuration into them after each step.
+    """
+
+    name = "solver"
+
+    def __init__(self, limits: JointLimits | None = None) -> None:
+        self.limits = limits
+
+    def arrange(self, levels: Levels) -> Levels:
+        """The levels this scheme actually solves (IK and Liegeois regroup them)."""
+        return levels
+
+    @abstractmethod
+    def compute_step(self, configuration: Configuration, levels: Levels) -> StepResult:
+        """One step from the configuration's current (already updated) kinematics."""
+
+    def solve(
+        self,
+        configuration: Configuration,
+        levels: Levels,
+        iterations: int = 15,
+        tolerance: float | None = None,
+    ) -> SolveResult:
+        """Iterate steps from configuration.q; the configuration ends updated at the result.
+
+        Args:
+            configuration: start state; updated in place.
+            levels: priority levels, highest first.
+            iterations: maximum number of steps (the paper uses 15 per frame).
+            tolerance: stop early once |dq| < tolerance.
+        """
+        if int(iterations) < 1:
+            raise InputError(f"iterations must be >= 1, got {iterations}")
+        for level in levels:
+            for task in level:
+                if isinstance(task, GradientTask):
+                    task.reset()
+        step_norms = []
+        step = StepResult(np.zeros(configuration.nv), [])
+        for _ in range(int(iterations)):
+            step = self.compute_step(configuration, levels)
+            q = configuration.integrate(step.dq)
+            if self.limits is not None:
+                q = self.limits.clamp(q)
+            configuration.update(q)
+            step_norms.append(float(np.linalg.norm(step.dq)))
+            if tolerance is not None and step_norms[-1] < tolerance:
+                break
+        violation = float("nan") if self.limits is None else self.limits.violation(configuration.q)
+        return SolveResult(
+            q=configuration.q.copy(),
+            iterations=len(step_norms),
+            levels=step.levels,
+            step_norms=np.array(step_norms),
+            limit_violation=violation,
+            failed_levels=sum(report.status == "failed" for report in step.levels),
+        )

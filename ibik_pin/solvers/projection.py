@@ -1,0 +1,117 @@
+"""Null-space projection schemes: the strict priority stack, Liegeois (eq. 4) and plain IK (eq. 3).
+
+The stack follows Baerlocher & Boulic (2004) in its recursive form
+    dq_k = dq_{k-1} + (J_k P_{k-1})^+_damped (b_k - J_k dq_{k-1}),
+    P_k  = P_{k-1} - (J_k P_{k-1})^+ (J_k P_{k-1}),
+with P_k kept as an orthonormal basis Z_k of the remaining null space (P_k = Z_k Z_k^T): the same
+projector, better conditioned, and the problem shrinks as levels use up freedom. A gradient level
+adds step_size * P_{k-1} g / |g| (the maximiser of g.dq - |dq|^2 / (2 step_size) over the null
+space, the same objective the QP uses) and consumes the one direction it used.
+
+IK and Liegeois are this stack with the levels regrouped: every least-squares task above the first
+gradient level merged into one primary task, then (Liegeois only) the gradient level.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..configuration import Configuration
+from ..exceptions import InputError
+from ..limits import JointLimits
+from ..tasks.base import GradientTask
+from .base import DEFAULT_DAMPING, GradientLevel, Levels, Solver, StepResult, build_levels, report_levels
+
+# Singular values below RANK_TOLERANCE * max(1, sigma_max) count as zero for the null space: small
+# enough that lower levels leak < 1e-8 into higher ones, while the damping keeps steps bounded.
+RANK_TOLERANCE = 1e-10
+
+
+class PriorityStackSolver(Solver):
+    """Strict priority stack by recursive null-space projection with damped pseudo-inverses.
+
+    Attributes:
+        damping: lambda of the damped pseudo-inverse J^T (J J^T + lambda^2 I)^-1 [same units as J].
+    """
+
+    name = "stack"
+
+    def __init__(self, damping: float = DEFAULT_DAMPING, limits: JointLimits | None = None) -> None:
+        super().__init__(limits)
+        if not (damping >= 0 and np.isfinite(damping)):
+            raise InputError(f"damping must be a finite number >= 0, got {damping}")
+        self.damping = float(damping)
+
+    def compute_step(self, configuration: Configuration, levels: Levels) -> StepResult:
+        built = build_levels(configuration, self.arrange(levels))
+        nv = configuration.nv
+        dq = np.zeros(nv)
+        null_basis = np.eye(nv)  # Z_{k-1}: orthonormal basis of the remaining null space
+        for level in built:
+            if level is None or null_basis.shape[1] == 0:
+                continue
+            if isinstance(level, GradientLevel):
+                if level.step_size == 0.0:
+                    continue
+                reduced = null_basis.T @ level.direction  # direction in null-space coordinates
+                dq += level.step_size * (null_basis @ reduced)
+                norm = np.linalg.norm(reduced)
+                if norm > RANK_TOLERANCE:
+                    # Remove the used direction: basis of the orthogonal complement of `reduced`.
+                    _, _, vt = np.linalg.svd(reduced[None, :] / norm)
+                    null_basis = null_basis @ vt[1:].T
+                continue
+            projected = level.A @ null_basis  # J_k Z_{k-1}
+            u, sigma, vt = np.linalg.svd(projected, full_matrices=True)
+            residual = level.b - level.A @ dq
+            rank = int(np.sum(sigma > RANK_TOLERANCE * max(1.0, sigma[0] if sigma.size else 0.0)))
+            damped = sigma[:rank] / (sigma[:rank] ** 2 + self.damping**2)
+            w = vt[:rank].T @ (damped * (u[:, :rank].T @ residual))
+            dq += null_basis @ w
+            null_basis = null_basis @ vt[rank:].T
+        if self.limits is not None:
+            # Scale the whole step (every level alike, so priorities hold) into the per-step bounds.
+            largest = np.max(np.abs(dq) / self.limits.step)
+            if largest > 1.0:
+                dq /= largest
+        return StepResult(dq, report_levels(built, dq))
+
+
+def _merge_least_squares(levels: Levels) -> list[list]:
+    """All least-squares tasks above the first gradient level, in one level."""
+    primary = []
+    for level in levels:
+        if any(isinstance(task, GradientTask) for task in level):
+            break
+        primary.extend(level)
+    return [primary]
+
+
+def _first_gradient_level(levels: Levels) -> list[list]:
+    for level in levels:
+        if any(isinstance(task, GradientTask) for task in level):
+            return [list(level)]
+    return []
+
+
+class LiegeoisSolver(PriorityStackSolver):
+    """Eq. (4): dq = J^+ e + (I - J^+ J) alpha grad h.
+
+    The primary task merges every least-squares task above the first gradient level; that gradient
+    level is the secondary criterion. Levels below it are not part of eq. (4) and are ignored.
+    """
+
+    name = "liegeois"
+
+    def arrange(self, levels: Levels) -> Levels:
+        return _merge_least_squares(levels) + _first_gradient_level(levels)
+
+
+class DampedLeastSquaresSolver(PriorityStackSolver):
+    """Eq. (3), the blind IK baseline: damped least squares on every least-squares task above the
+    first gradient level, merged; gradient levels and everything below them are ignored."""
+
+    name = "ik"
+
+    def arrange(self, levels: Levels) -> Levels:
+        return _merge_least_squares(levels)

@@ -1,0 +1,111 @@
+"""The two kinds of task every solver accepts.
+
+- `Task`: a least-squares task with an error e(q) and its Jacobian J(q). A step asks for
+  J dq = -gain * e (first-order convergence of e to zero), weighted by `weight` within its level.
+- `GradientTask`: a scalar criterion h(q) to maximise (the image overlap of eq. 5-6). A step moves
+  along its unit gradient with a norm of at most `step_size` (DESIGN.md: a normalised secondary
+  step converges where the raw gradient, in pixels per radian, does not). The step size adapts
+  like Rprop: halved when the gradient reverses, grown back while it keeps its direction.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+
+import numpy as np
+
+from ..configuration import Configuration
+from ..exceptions import InputError
+
+
+def _check_positive(name: str, value: float) -> float:
+    value = float(value)
+    if not np.isfinite(value) or value <= 0:
+        raise InputError(f"{name} must be a positive finite number, got {value}")
+    return value
+
+
+class Task(ABC):
+    """A least-squares task: drive e(q) to zero; a step asks J dq = -gain * e.
+
+    Attributes:
+        gain: fraction of the error corrected per step, in (0, 1].
+        weight: weight of this task's rows within its priority level.
+        enabled: a disabled task (e.g. an occluded target) is skipped by every solver.
+    """
+
+    def __init__(self, gain: float = 1.0, weight: float = 1.0) -> None:
+        self.gain = _check_positive("gain", gain)
+        if self.gain > 1.0:
+            raise InputError(f"gain must be in (0, 1], got {gain}")
+        self.weight = _check_positive("weight", weight)
+        self.enabled = True
+
+    @abstractmethod
+    def compute_error(self, configuration: Configuration) -> np.ndarray:
+        """Task error e(q), shape (m,)."""
+
+    @abstractmethod
+    def compute_jacobian(self, configuration: Configuration) -> np.ndarray:
+        """Task Jacobian de/dv, shape (m, nv)."""
+
+    def compute_linear_system(self, configuration: Configuration) -> tuple[np.ndarray, np.ndarray]:
+        """Weighted rows (A, b) of the step's least-squares problem A dq ~= b.
+
+        Returns:
+            A = sqrt(weight) J, shape (m, nv); b = -sqrt(weight) gain e, shape (m,).
+        """
+        scale = np.sqrt(self.weight)
+        return (
+            scale * self.compute_jacobian(configuration),
+            -scale * self.gain * self.compute_error(configuration),
+        )
+
+
+class GradientTask(ABC):
+    """A scalar criterion h(q) to maximise by steps of norm <= step_size along its gradient.
+
+    Attributes:
+        max_step_size: largest step norm [rad, or the units of v].
+        min_step_size: the adaptive step never shrinks below this.
+        step_size: the current step norm, reset to max_step_size by `reset`.
+    """
+
+    def __init__(self, max_step_size: float = 0.05, min_step_size: float = 1e-4) -> None:
+        self.max_step_size = _check_positive("max_step_size", max_step_size)
+        self.min_step_size = _check_positive("min_step_size", min_step_size)
+        self.enabled = True
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the step adaptation (call at the start of each solve)."""
+        self.step_size = self.max_step_size
+        self._previous_direction: np.ndarray | None = None
+
+    @abstractmethod
+    def compute_value(self, configuration: Configuration) -> float:
+        """The criterion h(q)."""
+
+    @abstractmethod
+    def compute_gradient(self, configuration: Configuration) -> np.ndarray:
+        """dh/dv, shape (nv,)."""
+
+    def compute_direction(self, configuration: Configuration) -> tuple[np.ndarray, float]:
+        """Unit ascent direction and the adapted step size for this step.
+
+        Returns:
+            direction: gradient / |gradient|, shape (nv,) (zeros if the gradient vanishes).
+            step_size: norm bound of the step along it.
+        """
+        gradient = self.compute_gradient(configuration)
+        norm = np.linalg.norm(gradient)
+        if norm == 0.0 or not np.isfinite(norm):
+            return np.zeros_like(gradient), 0.0
+        direction = gradient / norm
+        if self._previous_direction is not None:
+            if direction @ self._previous_direction < 0.0:
+                self.step_size = max(0.5 * self.step_size, self.min_step_size)
+            else:
+                self.step_size = min(1.2 * self.step_size, self.max_step_size)
+        self._previous_direction = direction
+        return direction, self.step_size

@@ -1,0 +1,137 @@
+"""The image criterion h(q) of eq. (5)-(8): overlap of the projected skeleton with a support image.
+
+Each segment between two keypoints is sampled at n points p = (1 - s) p_a + s p_b (s at the
+centres of n equal parts), every sample is projected into every enabled view and read from that
+view's support image with bilinear interpolation; h is the mean over views and samples (the 1/n
+of eq. 5, averaged over views for eq. 6). Convention: h is an overlap, to be MAXIMISED.
+
+Gradient by the chain rule (eq. 7-8):
+    dh/dq = mean over views and samples of  grad I_c(p)^T . dpi_c/dX . ((1 - s) J_a + s J_b)
+with J_a, J_b the world-aligned translation Jacobians of the segment ends (3 x nv), dpi_c/dX the
+2 x 3 projection Jacobian (distortion included) and grad I_c the exact derivative of the bilinear
+interpolant that reads I_c.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from ..configuration import Configuration
+from ..exceptions import EmptySilhouetteWarning, InputError
+from ..model import BodyModel
+from .base import GradientTask
+
+
+@dataclass
+class View:
+    """One calibrated camera and the support image the criterion reads in it.
+
+    Attributes:
+        camera: a camera with `project_with_jacobian(points_world (N,3))` returning pixels (N,2),
+            d pixels / d X_world (N,2,3) and depth (N,), and `size` = (width, height) [px].
+        support: a support image with `sample(pixels (N,2))` -> (values (N,), gradient (N,2))
+            and `enabled` (False for an empty silhouette).
+    """
+
+    camera: object
+    support: object
+
+
+class ImageTask(GradientTask):
+    """Maximise the overlap h(q) of the projected skeleton segments with the views' supports.
+
+    Attributes:
+        body: the body model (keypoints and segments).
+        views: the views; replace with `set_views` per frame.
+        samples_per_segment: n of eq. (5).
+        segment_weights: relative weight of each segment's samples, shape (S,).
+    """
+
+    def __init__(
+        self,
+        body: BodyModel,
+        views: Sequence[View] = (),
+        samples_per_segment: int = 8,
+        segments: Sequence[tuple[str, str]] | None = None,
+        max_step_size: float = 0.05,
+        min_step_size: float = 1e-4,
+    ) -> None:
+        super().__init__(max_step_size, min_step_size)
+        if int(samples_per_segment) < 1:
+            raise InputError(f"samples_per_segment must be >= 1, got {samples_per_segment}")
+        self.body = body
+        self.samples_per_segment = int(samples_per_segment)
+        segments = list(body.segments if segments is None else segments)
+        if not segments:
+            raise InputError("the image task needs at least one segment")
+        segment_frames = np.array(
+            [[body.frame_id(a), body.frame_id(b)] for a, b in segments], dtype=int
+        )
+        # Unique end frames, so each Jacobian is fetched once even when segments share a joint.
+        self._frame_ids, inverse = np.unique(segment_frames, return_inverse=True)
+        inverse = inverse.reshape(-1, 2)
+        n = self.samples_per_segment
+        s = (np.arange(n) + 0.5) / n
+        # Sample m = segment * n + i is interpolation_weights[m] @ positions of the unique frames.
+        weights = np.zeros((len(segments) * n, len(self._frame_ids)))
+        rows = np.arange(len(segments) * n)
+        np.add.at(weights, (rows, np.repeat(inverse[:, 0], n)), np.tile(1.0 - s, len(segments)))
+        np.add.at(weights, (rows, np.repeat(inverse[:, 1], n)), np.tile(s, len(segments)))
+        self._interpolation = weights
+        self.segments = segments
+        self.views: list[View] = []
+        self.set_views(views)
+        self._cache_version = -1
+        self._cache: tuple[float, np.ndarray] | None = None
+
+    def set_views(self, views: Sequence[View]) -> None:
+        """Replace the views (e.g. the next frame's supports); empty silhouettes are skipped."""
+        self.views = list(views)
+        for view in self.views:
+            if not getattr(view.support, "enabled", True):
+                warnings.warn(
+                    f"camera {getattr(view.camera, 'name', '?')!r}: the silhouette is empty, "
+                    "the image term is disabled for this view",
+                    EmptySilhouetteWarning,
+                    stacklevel=2,
+                )
+        self._active_views = [v for v in self.views if getattr(v.support, "enabled", True)]
+        self.enabled = bool(self._active_views)
+        self._cache_version = -1
+
+    def sample_points(self, configuration: Configuration) -> np.ndarray:
+        """World positions [m] of every segment sample, shape (S * n, 3)."""
+        return self._interpolation @ configuration.frame_positions(self._frame_ids)
+
+    def _evaluate(self, configuration: Configuration) -> tuple[float, np.ndarray]:
+        if self._cache_version == configuration.version and self._cache is not None:
+            return self._cache
+        points = self.sample_points(configuration)
+        value = 0.0
+        gradient_points = np.zeros_like(points)  # dh/dX for every sample, (M, 3)
+        for view in self._active_views:
+            pixels, projection_jacobian, depth = view.camera.project_with_jacobian(points)
+            support, support_gradient = view.support.sample(pixels)
+            in_front = depth > 1e-6
+            value += np.mean(np.where(in_front, support, 0.0))
+            contribution = np.einsum("mi,mij->mj", support_gradient, projection_jacobian)
+            gradient_points += np.where(in_front[:, None], contribution, 0.0)
+        count = max(len(self._active_views), 1)
+        value /= count
+        gradient_points /= count * len(points)
+        gradient_frames = self._interpolation.T @ gradient_points  # (K, 3)
+        jacobians = configuration.frame_translation_jacobians(self._frame_ids)  # (K, 3, nv)
+        gradient = np.einsum("kd,kdv->v", gradient_frames, jacobians)
+        self._cache = (float(value), gradient)
+        self._cache_version = configuration.version
+        return self._cache
+
+    def compute_value(self, configuration: Configuration) -> float:
+        return self._evaluate(configuration)[0]
+
+    def compute_gradient(self, configuration: Configuration) -> np.ndarray:
+        return self._evaluate(configuration)[1]

@@ -1,0 +1,57 @@
+"""Position of a model frame in the world: the end-effector task of eq. (1)-(3)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from ..configuration import Configuration
+from ..exceptions import InputError
+from ..model import frame_id
+from .base import Task
+
+
+class FramePositionTask(Task):
+    """Bring the origin of a frame to a world target: e = p_frame(q) - p_target [m].
+
+    Attributes:
+        frame_name: the model frame.
+        target: world target [m], shape (3,), or None (task disabled, e.g. occluded this frame).
+    """
+
+    def __init__(
+        self,
+        model: pin.Model,
+        frame_name: str,
+        target: np.ndarray | None = None,
+        gain: float = 1.0,
+        weight: float = 1.0,
+    ) -> None:
+        super().__init__(gain, weight)
+        self.frame_name = frame_name
+        self.frame_id = frame_id(model, frame_name)
+        self.set_target(target)
+
+    def set_target(self, target: np.ndarray | None) -> None:
+        """Set the world target [m], shape (3,); None disables the task."""
+        if target is None:
+            self.target = None
+            self.enabled = False
+            return
+        target = np.array(target, dtype=float)
+        if target.shape != (3,):
+            raise InputError(
+                f"target of frame {self.frame_name!r} must have shape (3,), got {target.shape}"
+            )
+        if not np.all(np.isfinite(target)):
+            raise InputError(
+                f"target of frame {self.frame_name!r} must be finite, got {target.tolist()}"
+            )
+        self.target = target
+        self.enabled = True
+
+    def compute_error(self, configuration: Configuration) -> np.ndarray:
+        return configuration.frame_position(self.frame_id) - self.target
+
+    def compute_jacobian(self, configuration: Configuration) -> np.ndarray:
+        return configuration.frame_translation_jacobian(self.frame_id)

@@ -1,0 +1,49 @@
+"""Posture: stay near a reference configuration (the usual lowest level of a stack)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from ..configuration import Configuration
+from ..exceptions import InputError
+from .base import Task
+
+
+class PostureTask(Task):
+    """e = q (-) q_ref on the actuated joints (the free-flyer root, if any, is left free).
+
+    The Jacobian is the identity on those velocity coordinates, exact for revolute and prismatic
+    joints.
+    """
+
+    def __init__(
+        self,
+        model: pin.Model,
+        reference: np.ndarray | None = None,
+        gain: float = 1.0,
+        weight: float = 1.0,
+    ) -> None:
+        super().__init__(gain, weight)
+        self.model = model
+        root_is_free = model.njoints > 1 and model.joints[1].shortname() == "JointModelFreeFlyer"
+        first = 6 if root_is_free else 0
+        self._rows = np.arange(first, model.nv)
+        self._jacobian = np.eye(model.nv)[self._rows]
+        self.set_reference(pin.neutral(model) if reference is None else reference)
+
+    def set_reference(self, reference: np.ndarray) -> None:
+        """Set the reference configuration, shape (nq,)."""
+        reference = np.array(reference, dtype=float)
+        if reference.shape != (self.model.nq,) or not np.all(np.isfinite(reference)):
+            raise InputError(
+                f"posture reference must be a finite array of shape ({self.model.nq},), "
+                f"got shape {reference.shape}"
+            )
+        self.reference = reference
+
+    def compute_error(self, configuration: Configuration) -> np.ndarray:
+        return pin.difference(self.model, self.reference, configuration.q)[self._rows]
+
+    def compute_jacobian(self, configuration: Configuration) -> np.ndarray:
+        return self._jacobian
