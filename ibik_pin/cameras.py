@@ -48,6 +48,8 @@ __all__ = [
     "write_calibration",
 ]
 
+PathLike = Union[str, os.PathLike]
+
 _ROTATION_TOLERANCE = 1e-6
 # Pose2Sim sections that do not describe a camera.
 _NON_CAMERA_SECTIONS = frozenset({"metadata", "capture_volume", "charuco", "checkerboard"})
@@ -289,7 +291,8 @@ class PinholeCamera(Camera):
         """Normalised coordinates x = X/Z, y = Y/Z, depth Z [m] and 1/Z of world points (N, 3)."""
         points_camera = self.points_camera(points_world)
         depth = points_camera[:, 2]
-        inverse_depth = 1.0 / depth
+        with np.errstate(divide="ignore"):  # a point on the focal plane goes to infinity
+            inverse_depth = 1.0 / depth
         return points_camera[:, 0] * inverse_depth, points_camera[:, 1] * inverse_depth, depth, inverse_depth
 
     def project(self, points_world: np.ndarray) -> np.ndarray:
@@ -470,9 +473,6 @@ def select_cameras(cameras: Sequence[Camera], names: Sequence[str]) -> list[Came
     return [by_name[name] for name in names]
 
 
-PathLike = Union[str, os.PathLike]
-
-
 def read_calibration(path: PathLike) -> list[PinholeCamera]:
     """Cameras from a Pose2Sim calibration TOML file, in file order.
 
@@ -500,7 +500,9 @@ def read_calibration(path: PathLike) -> list[PinholeCamera]:
     except OSError as error:
         raise FileFormatError(f"calibration file '{path}': cannot be read ({error.strerror or error})") from None
     except tomllib.TOMLDecodeError as error:
-        raise FileFormatError(f"calibration file '{path}': expected valid TOML, found a syntax error: {error}") from None
+        raise FileFormatError(
+            f"calibration file '{path}': expected valid TOML, found a syntax error: {error}"
+        ) from None
 
     cameras: list[PinholeCamera] = []
     for section, table in document.items():
@@ -514,7 +516,9 @@ def read_calibration(path: PathLike) -> list[PinholeCamera]:
     names = [camera.name for camera in cameras]
     repeated = sorted({name for name in names if names.count(name) > 1})
     if repeated:
-        raise FileFormatError(f"calibration file '{path}': key 'name': expected unique camera names, found {repeated} repeated")
+        raise FileFormatError(
+            f"calibration file '{path}': key 'name': expected unique camera names, found {repeated} repeated"
+        )
     return cameras
 
 

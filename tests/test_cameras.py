@@ -48,6 +48,10 @@ def points_in_front(camera: PinholeCamera, count: int, seed: int) -> np.ndarray:
     return (points_camera - camera.translation) @ camera.rotation
 
 
+def tiny_camera(name: str) -> PinholeCamera:
+    return look_at_camera(name, (10, 10), 10.0, [0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+
+
 def write_text(path: Path, text: str) -> Path:
     path.write_text(text, encoding="utf-8")
     return path
@@ -96,7 +100,7 @@ def test_pinhole_depth_is_the_z_coordinate_in_the_camera_frame():
 
 def test_orthographic_projection_scales_camera_coordinates_and_has_a_constant_jacobian():
     rotation, _ = cv2.Rodrigues(np.array([0.2, 0.1, -0.3]))
-    camera = OrthographicCamera("ortho", (200, 100), rotation, [0.1, 0.0, 2.0], scale=150.0, principal_point=[99.5, 49.5])
+    camera = OrthographicCamera("ortho", (200, 100), rotation, [0.1, 0.0, 2.0], 150.0, [99.5, 49.5])
     points = np.random.default_rng(3).normal(size=(20, 3))
     pixels, jacobian, depth = camera.project_with_jacobian(points)
     points_camera = points @ rotation.T + [0.1, 0.0, 2.0]
@@ -177,13 +181,16 @@ def test_read_calibration_names_file_section_and_missing_key(tmp_path):
 
 
 def test_read_calibration_names_the_key_with_the_wrong_shape(tmp_path):
-    path = write_text(tmp_path / "c.toml", CAMERA_SECTION.replace("rotation = [ 0.1, -0.2, 0.3]", "rotation = [ 0.1, -0.2]"))
-    with pytest.raises(FileFormatError, match=r"section \[cam_01\], key 'rotation'.*expected shape \(3,\), found shape \(2,\)"):
+    text = CAMERA_SECTION.replace("rotation = [ 0.1, -0.2, 0.3]", "rotation = [ 0.1, -0.2]")
+    path = write_text(tmp_path / "c.toml", text)
+    expected = r"section \[cam_01\], key 'rotation'.*expected shape \(3,\), found shape \(2,\)"
+    with pytest.raises(FileFormatError, match=expected):
         read_calibration(path)
 
 
 def test_read_calibration_rejects_a_non_finite_value(tmp_path):
-    path = write_text(tmp_path / "c.toml", CAMERA_SECTION.replace("translation = [ 0.1, 0.2, 3.0]", "translation = [ 0.1, nan, 3.0]"))
+    text = CAMERA_SECTION.replace("translation = [ 0.1, 0.2, 3.0]", "translation = [ 0.1, nan, 3.0]")
+    path = write_text(tmp_path / "c.toml", text)
     with pytest.raises(FileFormatError, match=r"key 'translation'.*expected finite values"):
         read_calibration(path)
 
@@ -209,11 +216,11 @@ def test_read_calibration_needs_at_least_one_camera(tmp_path):
 
 
 def test_select_cameras_returns_the_requested_cameras_in_the_given_order():
-    cameras = [look_at_camera(name, (10, 10), 10.0, [0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0]) for name in "abc"]
+    cameras = [tiny_camera(name) for name in "abc"]
     assert [camera.name for camera in select_cameras(cameras, ["c", "a"])] == ["c", "a"]
 
 
 def test_select_cameras_lists_the_available_names_for_an_unknown_one():
-    cameras = [look_at_camera(name, (10, 10), 10.0, [0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0]) for name in "ab"]
+    cameras = [tiny_camera(name) for name in "ab"]
     with pytest.raises(UnknownNameError, match=r"unknown camera name\(s\) \['z'\]; available cameras: \['a', 'b'\]"):
         select_cameras(cameras, ["a", "z"])

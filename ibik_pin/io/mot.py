@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ibik_pin.exceptions import FileFormatError, IbikWarning, InputError
-from ibik_pin.io.motion import read_text, write_text_atomically
+from ibik_pin.io.motion import is_number, read_text, write_text_atomically
 
 
 @dataclass
@@ -101,7 +101,7 @@ def write_mot(
     ]
     lines += [
         "\t".join(map(repr, [time, *row]))
-        for time, row in zip(times.tolist(), values.tolist())
+        for time, row in zip(times.tolist(), values.tolist(), strict=True)
     ]
     write_text_atomically(path, "\n".join(lines) + "\n")
 
@@ -139,7 +139,11 @@ def read_mot(path: str | os.PathLike[str]) -> MotData:
             f"got the end of the file"
         )
     labels_line = lines[end_index + 1]
-    labels = [label.strip() for label in labels_line.split("\t")] if "\t" in labels_line else labels_line.split()
+    labels = (
+        [label.strip() for label in labels_line.split("\t")]
+        if "\t" in labels_line
+        else labels_line.split()
+    )
     if not labels or labels[0].lower() != "time":
         raise FileFormatError(
             f"{path}, line {end_index + 2}: expected the first column to be 'time', "
@@ -182,10 +186,8 @@ def read_mot(path: str | os.PathLike[str]) -> MotData:
         try:
             table[row_index] = [float(cell) for cell in cells]
         except ValueError:
-            bad = next(cell for cell in cells if not _is_number(cell))
-            raise FileFormatError(
-                f"{path}, line {number}: expected numbers, got {bad!r}"
-            ) from None
+            bad = next(cell for cell in cells if not is_number(cell))
+            raise FileFormatError(f"{path}, line {number}: expected numbers, got {bad!r}") from None
     return MotData(
         header=header,
         column_names=labels[1:],
@@ -212,11 +214,3 @@ def _header_count(
             f"{path}, line {number}: {key}: expected a non-negative integer, got {header[key]!r}"
         )
     return count
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True

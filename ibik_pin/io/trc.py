@@ -3,8 +3,8 @@
 The format, tab separated::
 
     PathFileType  4  (X/Y/Z)  <file name>
-    DataRate  CameraRate  NumFrames  NumMarkers  Units  OrigDataRate  OrigDataStartFrame  OrigNumFrames
-    60  60  100  21  m  60  0  100
+    DataRate  CameraRate  NumFrames  NumMarkers  Units  OrigDataRate  OrigDataStartFrame  ...
+    60  60  100  21  m  60  0  ...
     Frame#  Time  RHip  <empty>  <empty>  RKnee  ...
     <empty>  <empty>  X1  Y1  Z1  X2  ...
     <optional blank line>
@@ -15,6 +15,7 @@ A missing marker is an empty cell, or a row that ends before its columns; both r
 
 from __future__ import annotations
 
+import math
 import os
 import warnings
 from dataclasses import dataclass
@@ -23,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ibik_pin.exceptions import FileFormatError, IbikWarning, InputError
-from ibik_pin.io.motion import read_text, write_text_atomically
+from ibik_pin.io.motion import is_number, read_text, write_text_atomically
 
 #: Metres per unit for the units a TRC file may declare.
 METRES_PER_UNIT = {"m": 1.0, "cm": 0.01, "mm": 0.001}
@@ -127,20 +128,16 @@ def read_trc(path: str | os.PathLike[str]) -> TrcData:
     """
     lines = read_text(path, "TRC").splitlines()
     if len(lines) < 5:
-        raise FileFormatError(
-            f"{path}: expected a 5-line TRC header, got {len(lines)} line(s)"
-        )
+        raise FileFormatError(f"{path}: expected a 5-line TRC header, got {len(lines)} line(s)")
     if lines[0].split(maxsplit=1)[:1] != ["PathFileType"]:
-        raise FileFormatError(
-            f"{path}, line 1: expected 'PathFileType', got {lines[0][:40]!r}"
-        )
+        raise FileFormatError(f"{path}, line 1: expected 'PathFileType', got {lines[0][:40]!r}")
     keys = [key.strip() for key in lines[1].split("\t")]
     values = [value.strip() for value in lines[2].split("\t")]
     if len(values) < len(keys):
         raise FileFormatError(
             f"{path}, line 3: expected {len(keys)} values for the keys of line 2, got {len(values)}"
         )
-    header = dict(zip(keys, values))
+    header = dict(zip(keys, values[: len(keys)], strict=True))
     missing = [key for key in _REQUIRED_KEYS if key not in header]
     if missing:
         raise FileFormatError(f"{path}, line 2: expected the keys {missing}, got {keys}")
@@ -175,7 +172,8 @@ def read_trc(path: str | os.PathLike[str]) -> TrcData:
     row_numbers = [number for number in range(6, len(lines) + 1) if lines[number - 1].strip()]
     if len(row_numbers) < declared_frames:
         raise FileFormatError(
-            f"{path}: NumFrames is {declared_frames} but the file holds {len(row_numbers)} data rows"
+            f"{path}: NumFrames is {declared_frames} but the file holds {len(row_numbers)} "
+            f"data rows"
         )
     if len(row_numbers) > declared_frames:
         warnings.warn(
@@ -201,7 +199,7 @@ def read_trc(path: str | os.PathLike[str]) -> TrcData:
                 f"{path}, line {number}: Frame#: expected an integer, got {row[0]!r}"
             ) from None
         time = row[1] if len(row) > 1 else ""
-        if not _is_number(time):
+        if not is_number(time):
             raise FileFormatError(f"{path}, line {number}: Time: expected a number, got {time!r}")
         times[row_index] = float(time)
         cells = row[2:column_count]
@@ -210,7 +208,7 @@ def read_trc(path: str | os.PathLike[str]) -> TrcData:
                 float(cell) if cell.strip() else np.nan for cell in cells
             ]
         except ValueError:
-            column = next(i for i, cell in enumerate(cells) if cell.strip() and not _is_number(cell))
+            column = next(i for i, cell in enumerate(cells) if cell.strip() and not is_number(cell))
             raise FileFormatError(
                 f"{path}, line {number}: {marker_names[column // 3]} {'XYZ'[column % 3]}: "
                 f"expected a number, got {cells[column]!r}"
@@ -263,8 +261,10 @@ def write_trc(path: str | os.PathLike[str], data: TrcData) -> None:
         "",
     ]
     coordinates = data.positions.reshape(frame_count, 3 * marker_count).tolist()
-    for frame_number, time, row in zip(data.frame_numbers.tolist(), data.times.tolist(), coordinates):
-        cells = "\t".join("" if value != value else repr(value) for value in row)
+    for frame_number, time, row in zip(
+        data.frame_numbers.tolist(), data.times.tolist(), coordinates, strict=True
+    ):
+        cells = "\t".join("" if math.isnan(value) else repr(value) for value in row)
         lines.append(f"{frame_number}\t{time!r}\t{cells}")
     write_text_atomically(path, "\n".join(lines) + "\n")
 
@@ -293,11 +293,3 @@ def _header_count(path: str | os.PathLike[str], header: dict[str, str], key: str
             f"{path}, line 3: {key}: expected a non-negative integer, got {header[key]!r}"
         )
     return count
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True

@@ -1,16 +1,18 @@
-"""Hierarchical QP: the priority levels solved lexicographically with proxsuite, joint limits as boxes.
+"""Hierarchical QP: the priority levels solved lexicographically with proxsuite, joint limits as bounds.
 
-Level k solves
-    least-squares level:  min |A_k dq - b_k|^2 + damping^2 |dq|^2
-    gradient level:       min -g.dq + |dq|^2 / (2 step_size)      (g the unit ascent direction)
-subject to  A_i dq = A_i dq*_{k-1}  for every higher level i  (keep their optimum)
-and         lower <= dq <= upper    (URDF position limits and per-step bounds, at every level).
-Without active bounds this is exactly the projection stack's step (same damping, same gradient
-objective). Each level is always feasible: the previous level's solution satisfies its constraints.
+Level k searches its increment in the null space left by the higher levels, dq = dq_{k-1} + Z w
+(Z orthonormal, as in the projection stack), which keeps every higher level's rows exactly where
+they were, whatever the QP's tolerance. It solves
+    least-squares level:  min |A_k (dq_{k-1} + Z w) - b_k|^2 + damping^2 |w|^2
+    gradient level:       min -g.Z w + |w|^2 / (2 step_size)          (g the unit ascent direction)
+subject to  lower - dq_{k-1} <= Z w <= upper - dq_{k-1}   (URDF position limits and per-step bounds).
+Without an active bound this is exactly the projection stack's step. Every level is feasible
+(w = 0 satisfies it); one whose target the bounds or higher levels forbid ends with a residual,
+reported "relaxed" (the least-squares relaxation).
 
 One proxsuite dense QP object per level is created once and updated, warm-started from its previous
-result across iterations and frames; it is rebuilt only when a level's constraint count changes
-(a target dropped for a frame). A backend failure skips that level (reported "failed"), never raises.
+result across iterations and frames; it is rebuilt only when a level's size changes (a target
+dropped for a frame). A backend failure skips that level (reported "failed"), never raises.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from ..configuration import Configuration
 from ..exceptions import InputError
 from ..limits import JointLimits
 from .base import DEFAULT_DAMPING, GradientLevel, Levels, Solver, StepResult, build_levels, report_levels
+from .nullspace import damped_solve, remove_direction
 
 UNBOUNDED = 1e20  # proxsuite's stand-in for an infinite bound
 _SOLVED = {
@@ -31,10 +34,10 @@ _SOLVED = {
 
 
 class HierarchicalQPSolver(Solver):
-    """Lexicographic QP stack on proxsuite with joint limits as box constraints.
+    """Lexicographic QP stack on proxsuite with joint limits as inequality constraints.
 
     Attributes:
-        damping: regulariser weight is damping^2, as the projection stack's damping.
+        damping: regulariser weight is damping^2 on each level's increment, as the stack's damping.
         accuracy: proxsuite's absolute tolerance eps_abs.
         max_qp_iterations: proxsuite's iteration cap per level.
     """
@@ -45,7 +48,7 @@ class HierarchicalQPSolver(Solver):
         self,
         limits: JointLimits | None = None,
         damping: float = DEFAULT_DAMPING,
-        accuracy: float = 1e-9,
+        accuracy: float = 1e-11,
         max_qp_iterations: int = 1000,
     ) -> None:
         super().__init__(limits)
@@ -54,20 +57,23 @@ class HierarchicalQPSolver(Solver):
         self.damping = float(damping)
         self.accuracy = float(accuracy)
         self.max_qp_iterations = int(max_qp_iterations)
-        self._qps: dict[int, tuple[int, int, object]] = {}  # level -> (nv, n_eq, QP)
+        self._qps: dict[int, tuple[tuple[int, int], object]] = {}  # level -> ((n, n_in), QP)
 
-    def _qp(self, level: int, nv: int, n_eq: int):
-        """The level's QP object: reused while its dimensions hold (returns it and 'is new')."""
+    def _qp(self, level: int, n: int, n_in: int):
+        """The level's QP object, reused while its size holds; returns it and whether it is new."""
         cached = self._qps.get(level)
-        if cached is not None and cached[0] == nv and cached[1] == n_eq:
-            return cached[2], False
-        qp = proxsuite.proxqp.dense.QP(nv, n_eq, 0, True)
+        if cached is not None and cached[0] == (n, n_in):
+            return cached[1], False
+        qp = proxsuite.proxqp.dense.QP(n, 0, n_in)
         qp.settings.eps_abs = self.accuracy
         qp.settings.eps_rel = 0.0
         qp.settings.max_iter = self.max_qp_iterations
         qp.settings.initial_guess = proxsuite.proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
         qp.settings.verbose = False
-        self._qps[level] = (nv, n_eq, qp)
+        # Bounds active on coordinates that the level's rows barely move make proxsuite declare a
+        # feasible problem "primal infeasible"; this mode returns the closest feasible point instead.
+        qp.settings.primal_infeasibility_solving = True
+        self._qps[level] = ((n, n_in), qp)
         return qp, True
 
     def compute_step(self, configuration: Configuration, levels: Levels) -> StepResult:
@@ -78,41 +84,115 @@ class HierarchicalQPSolver(Solver):
         else:
             lower, upper = np.full(nv, -UNBOUNDED), np.full(nv, UNBOUNDED)
         dq = np.clip(np.zeros(nv), lower, upper)
-        kept_rows: list[np.ndarray] = []  # rows whose values higher levels fixed
+        null_basis = np.eye(nv)
         failed: set[int] = set()
-        identity = np.eye(nv)
         for index, level in enumerate(built):
-            if level is None:
+            size = null_basis.shape[1]
+            if level is None or size == 0:
                 continue
             if isinstance(level, GradientLevel):
                 if level.step_size == 0.0:
                     continue
-                hessian = identity / level.step_size
-                linear = -level.direction
-                rows = level.direction[None, :]
+                reduced = null_basis.T @ level.direction
+                hessian = np.eye(size) / level.step_size
+                linear = -reduced
+                remaining = remove_direction(reduced)
             else:
-                hessian = level.A.T @ level.A + self.damping**2 * identity
-                linear = -level.A.T @ level.b
-                rows = level.A
-            equality = np.vstack(kept_rows) if kept_rows else None
-            equality_values = equality @ dq if kept_rows else None
-            n_eq = 0 if equality is None else equality.shape[0]
-            qp, is_new = self._qp(index, nv, n_eq)
-            arguments = (hessian, linear, equality, equality_values, None, None, None, lower, upper)
+                projected = level.A @ null_basis
+                residual = level.b - level.A @ dq
+                hessian = projected.T @ projected + self.damping**2 * np.eye(size)
+                linear = -projected.T @ residual
+                remaining = damped_solve(projected, residual, self.damping)[1]
+            w = self._solve_level(index, hessian, linear, null_basis, lower - dq, upper - dq)
+            if w is None:
+                failed.add(index)
+                continue
+            # proxsuite meets the bounds to eps_abs; clip so the limits hold exactly.
+            dq = np.clip(dq + null_basis @ w, lower, upper)
+            null_basis = null_basis @ remaining
+        return StepResult(dq, report_levels(built, dq, failed))
+
+    def _solve_level(self, index, hessian, linear, constraint, lower, upper) -> np.ndarray | None:
+        """proxsuite solve of min 1/2 w'Hw + g'w s.t. lower <= C w <= upper; None if it failed.
+
+        A warm start from a distant previous answer occasionally stalls; the level is then solved
+        once more from a fresh QP object before it counts as failed.
+        """
+        for _ in range(2):
+            qp, is_new = self._qp(index, hessian.shape[0], constraint.shape[0])
+            arguments = (hessian, linear, None, None, constraint, lower, upper)
             try:
                 if is_new:
                     qp.init(*arguments)
                 else:
                     qp.update(*arguments)
                 qp.solve()
-                solved = qp.results.info.status in _SOLVED and np.all(np.isfinite(qp.results.x))
+                w = qp.results.x
+                if qp.results.info.status in _SOLVED and np.all(np.isfinite(w)):
+                    return _polish(w, qp.results.z, hessian, linear, constraint, lower, upper)
             except (RuntimeError, ValueError):
-                solved = False
-            if not solved:
-                failed.add(index)
-                self._qps.pop(index, None)  # start afresh next time
-                continue
-            # proxsuite meets the box to eps_abs; clip so limits hold exactly.
-            dq = np.clip(qp.results.x, lower, upper)
-            kept_rows.append(rows)
-        return StepResult(dq, report_levels(built, dq, failed))
+                pass
+            self._qps.pop(index, None)
+        return None
+
+
+def _independent_rows(constraint: np.ndarray, candidates: list[int]) -> list[int]:
+    """The candidates, in order, whose rows are linearly independent of the earlier ones."""
+    chosen, basis = [], []
+    for index in candidates:  # Gram-Schmidt
+        row = constraint[index]
+        residual = row - sum((q @ row) * q for q in basis) if basis else row
+        norm = np.linalg.norm(residual)
+        if norm > 1e-9 * max(np.linalg.norm(row), 1e-300):
+            basis.append(residual / norm)
+            chosen.append(index)
+    return chosen
+
+
+def _polish(w, multipliers, hessian, linear, constraint, lower, upper, rounds: int = 6) -> np.ndarray:
+    """Re-solve on proxsuite's active set to rounding precision.
+
+    With the damping as the Hessian's smallest eigenvalue, proxsuite's tolerance on the dual
+    residual leaves w accurate to about eps_abs / damping^2 only (1e-6 here), and near-dependent
+    active bounds can leave it off by much more. Starting from proxsuite's active set (independent
+    rows, largest multipliers first), a few active-set rounds solve the KKT system exactly, drop a
+    bound whose multiplier has the wrong sign, add the most violated one. A feasible answer with
+    right-signed multipliers is the optimum; if none is found, proxsuite's answer stands.
+    """
+    values = constraint @ w
+    candidates = np.flatnonzero(
+        ((multipliers > 0) & (upper - values < 1e-6)) | ((multipliers < 0) & (values - lower < 1e-6))
+    )
+    candidates = candidates[np.argsort(-np.abs(multipliers[candidates]))]
+    chosen = _independent_rows(constraint, candidates.tolist())
+    side_is_upper = {int(i): bool(multipliers[i] > 0) for i in chosen}
+    n = hessian.shape[0]
+    for _ in range(rounds):
+        m = len(chosen)
+        rows = constraint[chosen]
+        kkt = np.zeros((n + m, n + m))
+        kkt[:n, :n] = hessian
+        kkt[:n, n:] = rows.T
+        kkt[n:, :n] = rows
+        upper_side = np.array([side_is_upper[i] for i in chosen], dtype=bool)
+        targets = np.where(upper_side, upper[chosen], lower[chosen])
+        try:
+            solution = np.linalg.solve(kkt, np.concatenate([-linear, targets]))
+        except np.linalg.LinAlgError:
+            break
+        polished, duals = solution[:n], solution[n:]
+        # Multiplier sign: positive pushes against an upper bound, negative against a lower one.
+        wrong_sign = np.where(upper_side, -duals, duals)
+        if m and wrong_sign.max() > 1e-10:
+            chosen.pop(int(np.argmax(wrong_sign)))
+            continue
+        polished_values = constraint @ polished
+        violation = np.maximum(polished_values - upper, lower - polished_values)
+        worst = int(np.argmax(violation))
+        if violation[worst] <= 1e-10:
+            return polished
+        if worst in chosen or len(_independent_rows(constraint, chosen + [worst])) == len(chosen):
+            break
+        chosen.append(worst)
+        side_is_upper[worst] = bool(polished_values[worst] > upper[worst])
+    return w.copy()

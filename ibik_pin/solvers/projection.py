@@ -20,12 +20,8 @@ from ..configuration import Configuration
 from ..exceptions import InputError
 from ..limits import JointLimits
 from ..tasks.base import GradientTask
+from .nullspace import damped_solve, remove_direction
 from .base import DEFAULT_DAMPING, GradientLevel, Levels, Solver, StepResult, build_levels, report_levels
-
-# Singular values below RANK_TOLERANCE * max(1, sigma_max) count as zero for the null space: small
-# enough that lower levels leak < 1e-8 into higher ones, while the damping keeps steps bounded.
-RANK_TOLERANCE = 1e-10
-
 
 class PriorityStackSolver(Solver):
     """Strict priority stack by recursive null-space projection with damped pseudo-inverses.
@@ -55,20 +51,11 @@ class PriorityStackSolver(Solver):
                     continue
                 reduced = null_basis.T @ level.direction  # direction in null-space coordinates
                 dq += level.step_size * (null_basis @ reduced)
-                norm = np.linalg.norm(reduced)
-                if norm > RANK_TOLERANCE:
-                    # Remove the used direction: basis of the orthogonal complement of `reduced`.
-                    _, _, vt = np.linalg.svd(reduced[None, :] / norm)
-                    null_basis = null_basis @ vt[1:].T
+                null_basis = null_basis @ remove_direction(reduced)
                 continue
-            projected = level.A @ null_basis  # J_k Z_{k-1}
-            u, sigma, vt = np.linalg.svd(projected, full_matrices=True)
-            residual = level.b - level.A @ dq
-            rank = int(np.sum(sigma > RANK_TOLERANCE * max(1.0, sigma[0] if sigma.size else 0.0)))
-            damped = sigma[:rank] / (sigma[:rank] ** 2 + self.damping**2)
-            w = vt[:rank].T @ (damped * (u[:, :rank].T @ residual))
+            w, remaining = damped_solve(level.A @ null_basis, level.b - level.A @ dq, self.damping)
             dq += null_basis @ w
-            null_basis = null_basis @ vt[rank:].T
+            null_basis = null_basis @ remaining
         if self.limits is not None:
             # Scale the whole step (every level alike, so priorities hold) into the per-step bounds.
             largest = np.max(np.abs(dq) / self.limits.step)

@@ -1,0 +1,43 @@
+"""Null-space bookkeeping shared by the projection stack and the hierarchical QP.
+
+The projector P_k of the recursive stack is kept as an orthonormal basis Z_k of the remaining null
+space (P_k = Z_k Z_k^T), computed from one SVD of each level's projected Jacobian J_k Z_{k-1}.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+# Singular values below RANK_TOLERANCE * max(1, sigma_max) count as zero for the null space: small
+# enough that lower levels leak < 1e-8 into higher ones, while damping keeps the steps bounded.
+RANK_TOLERANCE = 1e-10
+
+
+def damped_solve(
+    projected: np.ndarray, residual: np.ndarray, damping: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Damped least squares in null-space coordinates, and the null space left after it.
+
+    Args:
+        projected: J_k Z_{k-1}, shape (m, r).
+        residual: b_k - J_k dq_{k-1}, shape (m,).
+        damping: lambda of (JZ)^T ((JZ)(JZ)^T + lambda^2 I)^-1.
+
+    Returns:
+        w: the step in null-space coordinates, shape (r,).
+        remaining: orthonormal basis of null(J_k Z_{k-1}) in those coordinates, shape (r, r').
+    """
+    u, sigma, vt = np.linalg.svd(projected, full_matrices=True)
+    rank = int(np.sum(sigma > RANK_TOLERANCE * max(1.0, sigma[0] if sigma.size else 0.0)))
+    damped = sigma[:rank] / (sigma[:rank] ** 2 + damping**2)
+    w = vt[:rank].T @ (damped * (u[:, :rank].T @ residual))
+    return w, vt[rank:].T
+
+
+def remove_direction(reduced: np.ndarray) -> np.ndarray:
+    """Orthonormal basis of the complement of one direction, shape (r, r - 1) (or (r, r) if zero)."""
+    norm = np.linalg.norm(reduced)
+    if norm <= RANK_TOLERANCE:
+        return np.eye(reduced.size)
+    _, _, vt = np.linalg.svd(reduced[None, :] / norm)
+    return vt[1:].T

@@ -1,0 +1,45 @@
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from ibik_pin.configuration import Configuration
+from ibik_pin.exceptions import InputError
+from tests.conftest import random_human_configuration
+
+
+def test_frame_jacobians_match_finite_differences_on_the_human(human, rng):
+    q = random_human_configuration(human, rng)
+    configuration = Configuration(human.model, q)
+    frame_ids = human.frame_ids(["LWrist", "Head", "RBigToe"])
+    jacobians = configuration.frame_translation_jacobians(frame_ids)
+    positions = configuration.frame_positions(frame_ids)
+    eps = 1e-7
+    numeric = np.zeros_like(jacobians)
+    for k in range(human.model.nv):
+        dv = np.zeros(human.model.nv)
+        dv[k] = eps
+        shifted = Configuration(human.model, pin.integrate(human.model, q, dv))
+        numeric[:, :, k] = (shifted.frame_positions(frame_ids) - positions) / eps
+    assert np.linalg.norm(numeric - jacobians) / np.linalg.norm(jacobians) < 1e-4
+
+
+def test_update_bumps_the_version_and_refreshes_positions(human, rng):
+    configuration = Configuration(human.model)
+    version = configuration.version
+    frame = human.frame_id("LWrist")
+    before = configuration.frame_position(frame).copy()
+    configuration.update(random_human_configuration(human, rng))
+    assert configuration.version == version + 1
+    assert not np.allclose(before, configuration.frame_position(frame))
+
+
+def test_a_configuration_of_the_wrong_size_is_refused(human):
+    with pytest.raises(InputError, match=r"shape \(43,\)"):
+        Configuration(human.model, np.zeros(36))
+
+
+def test_a_non_finite_configuration_is_refused(human):
+    q = pin.neutral(human.model)
+    q[10] = np.nan
+    with pytest.raises(InputError, match="finite"):
+        Configuration(human.model, q)
