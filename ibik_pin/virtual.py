@@ -1,0 +1,203 @@
+"""The paper's virtual experiments (Section 3, Figs. 6-8): the planar chain seen by one camera.
+
+A `PlanarScene` holds the 4-segment chain, an orthographic camera looking at its plane, the
+objective configuration's silhouette (rendered by the project's renderer) and the support image the
+criterion reads; optionally a square object drawn into the image that the chain must avoid
+(support built so that the object repels). `run_planar` drives the chain's end effector to the
+objective's with a given solver, with or without the image level, and records every iteration.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from .cameras import OrthographicCamera
+from .configuration import Configuration
+from .images import SupportImage, obstacle_support, support_from_mask
+from .model import BodyModel, load_planar_chain
+from .render import render_capsules
+from .solvers import Solver
+from .tasks import FramePositionTask, ImageTask, View
+
+IMAGE_SIZE = (400, 400)  # [px]
+PIXELS_PER_METRE = 150.0
+CHAIN_LENGTH = 1.0  # [m], 4 segments of 0.25 m
+
+
+def planar_camera() -> OrthographicCamera:
+    """Looks down the world Z axis at the chain's plane; world +Y is image up."""
+    return OrthographicCamera(
+        name="virtual",
+        size=IMAGE_SIZE,
+        rotation=np.diag([1.0, -1.0, -1.0]),
+        translation=np.array([0.0, 0.0, 5.0]),
+        scale=PIXELS_PER_METRE,
+        principal_point=np.array([IMAGE_SIZE[0] / 2, IMAGE_SIZE[1] / 2]),
+    )
+
+
+@dataclass
+class PlanarScene:
+    """The chain, its camera, the objective and the support image the criterion reads.
+
+    Attributes:
+        body: the planar chain.
+        camera: the orthographic camera.
+        objective_q: the configuration whose silhouette is the image, shape (4,) [rad].
+        silhouette: the objective's rendered silhouette (H, W), or None (fig8: no silhouette).
+        object_mask: the square object (H, W), or None.
+        support: the support image.
+    """
+
+    body: BodyModel
+    camera: OrthographicCamera
+    objective_q: np.ndarray
+    silhouette: np.ndarray | None
+    object_mask: np.ndarray | None
+    support: SupportImage
+
+    def keypoint_positions(self, q: np.ndarray) -> np.ndarray:
+        """World positions [m] of joint_1..joint_4 and the end effector, shape (5, 3)."""
+        configuration = Configuration(self.body.model, q)
+        return configuration.frame_positions(self.body.frame_ids(list(self.body.keypoints)))
+
+
+def render_chain(body: BodyModel, camera, q: np.ndarray) -> np.ndarray:
+    """Silhouette (H, W) bool of the chain at q, capsules of the body's segment radii."""
+    configuration = Configuration(body.model, q)
+    ends = configuration.frame_positions(body.segment_frame_ids.reshape(-1)).reshape(-1, 2, 3)
+    return render_capsules(camera, ends[:, 0], ends[:, 1], body.segment_radii)
+
+
+def square_mask(center_world: np.ndarray, half_side: float, camera) -> np.ndarray:
+    """A filled square (H, W) bool centred on a world point of the plane, half side [m]."""
+    width, height = camera.size
+    corners = camera.project(
+        np.array([center_world + [sx * half_side, sy * half_side, 0.0] for sx in (-1, 1) for sy in (-1, 1)])
+    )
+    u0, v0 = np.floor(corners.min(axis=0)).astype(int)
+    u1, v1 = np.ceil(corners.max(axis=0)).astype(int)
+    mask = np.zeros((height, width), dtype=bool)
+    mask[max(v0, 0) : max(v1, 0), max(u0, 0) : max(u1, 0)] = True
+    return mask
+
+
+def make_scene(
+    objective_q: np.ndarray,
+    with_silhouette: bool = True,
+    obstacle_center: np.ndarray | None = None,
+    obstacle_half_side: float = 0.08,
+    obstacle_influence_px: float = 25.0,
+    inside_cap_px: float = 3.0,
+) -> PlanarScene:
+    """Build a planar scene; the support is the silhouette's signed distance plus the obstacle's
+    repulsion (either may be absent)."""
+    body = load_planar_chain()
+    camera = planar_camera()
+    objective_q = np.asarray(objective_q, dtype=float)
+    width, height = camera.size
+    support = SupportImage(np.zeros((height, width), dtype=np.float32))
+    silhouette = None
+    if with_silhouette:
+        silhouette = render_chain(body, camera, objective_q)
+        support = support_from_mask(silhouette, inside_cap_px=inside_cap_px, smooth_sigma_px=1.0)
+    object_mask = None
+    if obstacle_center is not None:
+        object_mask = square_mask(np.asarray(obstacle_center, dtype=float), obstacle_half_side, camera)
+        support = support + obstacle_support(object_mask, obstacle_influence_px)
+    return PlanarScene(body, camera, objective_q, silhouette, object_mask, support)
+
+
+@dataclass
+class PlanarRun:
+    """One run of the chain: the configuration at every iteration and the metrics of the paper.
+
+    Errors are fractions of the chain's total length; `object_hits` counts the iterations in which
+    a segment crosses the object.
+    """
+
+    trajectory: np.ndarray  # (iterations + 1, 4) [rad], the start included
+    end_effector_error: float
+    internal_joint_error: float
+    overlap: float
+    object_hits: int
+
+
+def segment_hits_object(scene: PlanarScene, q: np.ndarray, samples: int = 60) -> bool:
+    """Whether any segment of the chain at q crosses the object in the image."""
+    if scene.object_mask is None:
+        return False
+    ends = scene.keypoint_positions(q)
+    s = np.linspace(0.0, 1.0, samples)[None, :, None]
+    points = ((1 - s) * ends[:-1, None, :] + s * ends[1:, None, :]).reshape(-1, 3)
+    pixels = np.rint(scene.camera.project(points)).astype(int)
+    height, width = scene.object_mask.shape
+    inside = (pixels[:, 0] >= 0) & (pixels[:, 0] < width) & (pixels[:, 1] >= 0) & (pixels[:, 1] < height)
+    return bool(scene.object_mask[pixels[inside, 1], pixels[inside, 0]].any())
+
+
+def run_planar(
+    scene: PlanarScene,
+    start_q: np.ndarray,
+    solver: Solver,
+    use_image: bool,
+    iterations: int = 400,
+    end_effector_gain: float = 1.0,
+    image_step: float = 0.05,
+    target: np.ndarray | None = None,
+) -> PlanarRun:
+    """Drive the end effector to the objective's (or `target`), with or without the image level.
+
+    Levels: [end-effector position], then [image criterion] when `use_image`. Every iteration is
+    one solver step, recorded.
+    """
+    body = scene.body
+    model = body.model
+    objective = scene.keypoint_positions(scene.objective_q)
+    goal = objective[-1] if target is None else np.asarray(target, dtype=float)
+    end_effector = FramePositionTask(model, body.keypoints["end_effector"], goal, gain=end_effector_gain)
+    levels: list[list] = [[end_effector]]
+    image_task = ImageTask(body, [View(scene.camera, scene.support)], samples_per_segment=10,
+                           max_step_size=image_step)
+    if use_image:
+        levels.append([image_task])
+    configuration = Configuration(model, start_q)
+    trajectory = [configuration.q.copy()]
+    hits = int(segment_hits_object(scene, configuration.q))
+    for level in levels:
+        for task in level:
+            if isinstance(task, ImageTask):
+                task.reset()
+    for _ in range(iterations):
+        step = solver.compute_step(configuration, levels)
+        q = configuration.integrate(step.dq)
+        if solver.limits is not None:
+            q = solver.limits.clamp(q)
+        configuration.update(q)
+        trajectory.append(q.copy())
+        hits += segment_hits_object(scene, q)
+    final = scene.keypoint_positions(configuration.q)
+    return PlanarRun(
+        trajectory=np.array(trajectory),
+        end_effector_error=float(np.linalg.norm(final[-1] - goal) / CHAIN_LENGTH),
+        internal_joint_error=float(
+            np.mean(np.linalg.norm(final[1:-1] - objective[1:-1], axis=1)) / CHAIN_LENGTH
+        ),
+        overlap=float(image_task.compute_value(configuration)),
+        object_hits=hits,
+    )
+
+
+def same_end_effector_configuration(objective_q: np.ndarray, start_q: np.ndarray, iterations: int = 200) -> np.ndarray:
+    """A configuration near `start_q` whose end effector is the objective's (fig7's start)."""
+    from .solvers import DampedLeastSquaresSolver
+
+    body = load_planar_chain()
+    goal = Configuration(body.model, objective_q).frame_position(body.frame_id("end_effector")).copy()
+    task = FramePositionTask(body.model, "end_effector", goal)
+    configuration = Configuration(body.model, start_q)
+    DampedLeastSquaresSolver(damping=1e-4).solve(configuration, [[task]], iterations=iterations)
+    return pin.normalize(body.model, configuration.q)
