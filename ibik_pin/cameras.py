@@ -23,6 +23,7 @@ import os
 import re
 import sys
 import tempfile
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple, Sequence, Union
@@ -631,3 +632,23 @@ def write_calibration(path: PathLike, cameras: Sequence[PinholeCamera]) -> None:
         if os.path.exists(temporary):
             os.unlink(temporary)
         raise
+
+
+# Pose2Sim writes TRC files Y-up while its calibration's world is Z-up: a TRC point (x, y, z) is the
+# calibration-world point (z, x, y) (see ../shared/data/README.md, pose2sim_demo).
+POSE2SIM_TRC_TO_WORLD = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+
+
+def cameras_in_frame(cameras: Sequence[Camera], frame_to_world: np.ndarray) -> list[Camera]:
+    """The same cameras seeing points expressed in another frame.
+
+    Args:
+        cameras: cameras whose extrinsics map calibration-world points.
+        frame_to_world: M (3, 3) rotation, world point = M @ point in the new frame (for Pose2Sim
+            TRC files, POSE2SIM_TRC_TO_WORLD).
+
+    Returns:
+        Cameras with rotation R @ M, so that they project points given in the new frame.
+    """
+    frame_to_world = _as_rotation(frame_to_world, "frame_to_world")
+    return [dataclasses.replace(camera, rotation=camera.rotation @ frame_to_world) for camera in cameras]

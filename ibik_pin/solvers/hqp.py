@@ -4,7 +4,7 @@ Level k searches its increment in the null space left by the higher levels, dq =
 (Z orthonormal, as in the projection stack), which keeps every higher level's rows exactly where
 they were, whatever the QP's tolerance. It solves
     least-squares level:  min |A_k (dq_{k-1} + Z w) - b_k|^2 + damping^2 |w|^2
-    gradient level:       min -g.Z w + |w|^2 / (2 step_size)          (g the unit ascent direction)
+    gradient level:       min -g.Z w + |w|^2 / (2 step_size)    (Z^T g of unit norm, as the stack)
 subject to  lower - dq_{k-1} <= Z w <= upper - dq_{k-1}   (URDF position limits and per-step bounds).
 Without an active bound this is exactly the projection stack's step. Every level is feasible
 (w = 0 satisfies it); one whose target the bounds or higher levels forbid ends with a residual,
@@ -24,7 +24,7 @@ from ..configuration import Configuration
 from ..exceptions import InputError
 from ..limits import JointLimits
 from .base import DEFAULT_DAMPING, GradientLevel, Levels, Solver, StepResult, build_levels, report_levels
-from .nullspace import damped_solve, remove_direction
+from .nullspace import damped_solve, remove_direction, unit_reduced_direction
 
 UNBOUNDED = 1e20  # proxsuite's stand-in for an infinite bound
 _SOLVED = {
@@ -93,7 +93,9 @@ class HierarchicalQPSolver(Solver):
             if isinstance(level, GradientLevel):
                 if level.step_size == 0.0:
                     continue
-                reduced = null_basis.T @ level.direction
+                reduced = unit_reduced_direction(null_basis, level.direction)
+                if reduced is None:
+                    continue
                 hessian = np.eye(size) / level.step_size
                 linear = -reduced
                 remaining = remove_direction(reduced)

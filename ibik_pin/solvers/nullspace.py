@@ -41,3 +41,10 @@ def remove_direction(reduced: np.ndarray) -> np.ndarray:
         return np.eye(reduced.size)
     _, _, vt = np.linalg.svd(reduced[None, :] / norm)
     return vt[1:].T
+
+
+def unit_reduced_direction(null_basis: np.ndarray, direction: np.ndarray) -> np.ndarray | None:
+    """Z^T g / |Z^T g|: a gradient in null-space coordinates, of unit norm; None if it vanishes."""
+    reduced = null_basis.T @ direction
+    norm = np.linalg.norm(reduced)
+    return None if norm <= RANK_TOLERANCE else reduced / norm

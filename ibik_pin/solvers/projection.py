@@ -5,8 +5,10 @@ The stack follows Baerlocher & Boulic (2004) in its recursive form
     P_k  = P_{k-1} - (J_k P_{k-1})^+ (J_k P_{k-1}),
 with P_k kept as an orthonormal basis Z_k of the remaining null space (P_k = Z_k Z_k^T): the same
 projector, better conditioned, and the problem shrinks as levels use up freedom. A gradient level
-adds step_size * P_{k-1} g / |g| (the maximiser of g.dq - |dq|^2 / (2 step_size) over the null
-space, the same objective the QP uses) and consumes the one direction it used.
+adds step_size * P_{k-1} g / |P_{k-1} g| (the maximiser of g.dq - |dq|^2 / (2 step_size) over the null
+space, the same objective the QP uses, with g normalised after projection so that the step keeps
+its length when most of the gradient is spent against higher levels) and consumes the one direction
+it used.
 
 IK and Liegeois are this stack with the levels regrouped: every least-squares task above the first
 gradient level merged into one primary task, then (Liegeois only) the gradient level.
@@ -20,7 +22,7 @@ from ..configuration import Configuration
 from ..exceptions import InputError
 from ..limits import JointLimits
 from ..tasks.base import GradientTask
-from .nullspace import damped_solve, remove_direction
+from .nullspace import damped_solve, remove_direction, unit_reduced_direction
 from .base import DEFAULT_DAMPING, GradientLevel, Levels, Solver, StepResult, build_levels, report_levels
 
 class PriorityStackSolver(Solver):
@@ -49,7 +51,9 @@ class PriorityStackSolver(Solver):
             if isinstance(level, GradientLevel):
                 if level.step_size == 0.0:
                     continue
-                reduced = null_basis.T @ level.direction  # direction in null-space coordinates
+                reduced = unit_reduced_direction(null_basis, level.direction)
+                if reduced is None:
+                    continue
                 dq += level.step_size * (null_basis @ reduced)
                 null_basis = null_basis @ remove_direction(reduced)
                 continue
