@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pinocchio as pin
 
 from .exceptions import InputError
 
 _WORLD_ALIGNED = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+_KINEMATIC_STATES = itertools.count(1)  # one number per update, unique across all configurations
 
 
 class Configuration:
@@ -26,7 +29,7 @@ class Configuration:
         self.model = model
         self.data = model.createData()
         self._jacobian_cache: dict[int, np.ndarray] = {}
-        self.version = 0  # incremented by every update, so tasks can memoise per kinematic state
+        self.version = 0  # a new unique number at every update, so tasks can memoise per state
         self.q = pin.neutral(model) if q is None else self._checked(q)
         self.update()
 
@@ -45,7 +48,7 @@ class Configuration:
         pin.computeJointJacobians(self.model, self.data, self.q)
         pin.updateFramePlacements(self.model, self.data)
         self._jacobian_cache.clear()
-        self.version += 1
+        self.version = next(_KINEMATIC_STATES)
 
     @property
     def nv(self) -> int:

@@ -19,7 +19,7 @@ from .configuration import Configuration
 from .images import SupportImage, obstacle_support, support_from_mask
 from .model import BodyModel, load_planar_chain
 from .render import render_capsules
-from .solvers import Solver
+from .solvers import DampedLeastSquaresSolver, Solver, make_solver
 from .tasks import FramePositionTask, ImageTask, View
 
 IMAGE_SIZE = (400, 400)  # [px]
@@ -191,13 +191,81 @@ def run_planar(
     )
 
 
-def same_end_effector_configuration(objective_q: np.ndarray, start_q: np.ndarray, iterations: int = 200) -> np.ndarray:
+def same_end_effector_configuration(
+    objective_q: np.ndarray, start_q: np.ndarray, iterations: int = 200
+) -> np.ndarray:
     """A configuration near `start_q` whose end effector is the objective's (fig7's start)."""
-    from .solvers import DampedLeastSquaresSolver
-
     body = load_planar_chain()
     goal = Configuration(body.model, objective_q).frame_position(body.frame_id("end_effector")).copy()
     task = FramePositionTask(body.model, "end_effector", goal)
     configuration = Configuration(body.model, start_q)
     DampedLeastSquaresSolver(damping=1e-4).solve(configuration, [[task]], iterations=iterations)
     return pin.normalize(body.model, configuration.q)
+
+
+@dataclass(frozen=True)
+class PaperExperiment:
+    """One of the paper's virtual experiments and the settings that reproduce it.
+
+    Attributes:
+        name: "fig6", "fig7" or "fig8".
+        description: what it shows.
+        objective_q: the configuration whose silhouette is the image [rad] (fig8: none drawn).
+        start_q: where the chain starts [rad]; fig7 derives it (same end effector as the objective).
+        target: the end-effector target [m] (None: the objective's end effector).
+        obstacle_center: fig8's square object [m], or None.
+        end_effector_gain, image_step, iterations: solver settings.
+    """
+
+    name: str
+    description: str
+    objective_q: tuple[float, ...]
+    start_q: tuple[float, ...]
+    target: tuple[float, float, float] | None = None
+    obstacle_center: tuple[float, float, float] | None = None
+    end_effector_gain: float = 1.0
+    image_step: float = 0.05
+    iterations: int = 400
+
+    def scene(self) -> PlanarScene:
+        if self.obstacle_center is not None:
+            return make_scene(
+                np.array(self.objective_q), with_silhouette=False,
+                obstacle_center=np.array(self.obstacle_center), obstacle_influence_px=40.0,
+            )
+        return make_scene(np.array(self.objective_q))
+
+    def start(self) -> np.ndarray:
+        if self.name == "fig7":
+            return same_end_effector_configuration(np.array(self.objective_q), np.array(self.start_q))
+        return np.array(self.start_q)
+
+
+PAPER_EXPERIMENTS = {
+    "fig6": PaperExperiment(
+        "fig6", "different start and objective configurations",
+        objective_q=(1.2, -0.9, 0.8, -0.6), start_q=(0.3, 0.3, 0.3, 0.3),
+    ),
+    "fig7": PaperExperiment(
+        "fig7", "same end-effector position, different internal configuration",
+        objective_q=(0.9, -0.7, -0.6, 0.5), start_q=(-0.2, 0.9, 0.6, -0.6),
+    ),
+    "fig8": PaperExperiment(
+        "fig8", "reach the end-effector target while avoiding a square object drawn into the image",
+        objective_q=(0.0, 0.0, 0.0, 0.0), start_q=(-0.6, 0.4, 0.4, 0.4), target=(0.5, 0.7, 0.0),
+        obstacle_center=(0.35, 0.3, 0.0), end_effector_gain=0.3, image_step=0.05,
+    ),
+}
+
+
+def run_paper_experiment(name: str, use_image: bool, solver_name: str = "stack") -> tuple[PlanarScene, PlanarRun]:
+    """Run one of PAPER_EXPERIMENTS as IK (use_image False) or IBIK with the named solver scheme."""
+    experiment = PAPER_EXPERIMENTS[name]
+    scene = experiment.scene()
+    run = run_planar(
+        scene, experiment.start(), make_solver(solver_name), use_image,
+        iterations=experiment.iterations, end_effector_gain=experiment.end_effector_gain,
+        image_step=experiment.image_step,
+        target=None if experiment.target is None else np.array(experiment.target),
+    )
+    return scene, run

@@ -23,13 +23,14 @@ def test_frame_jacobians_match_finite_differences_on_the_human(human, rng):
     assert np.linalg.norm(numeric - jacobians) / np.linalg.norm(jacobians) < 1e-4
 
 
-def test_update_bumps_the_version_and_refreshes_positions(human, rng):
+def test_update_gives_a_new_version_and_refreshes_positions(human, rng):
     configuration = Configuration(human.model)
+    other = Configuration(human.model)
     version = configuration.version
     frame = human.frame_id("LWrist")
     before = configuration.frame_position(frame).copy()
     configuration.update(random_human_configuration(human, rng))
-    assert configuration.version == version + 1
+    assert configuration.version not in (version, other.version)
     assert not np.allclose(before, configuration.frame_position(frame))
 
 

@@ -40,6 +40,16 @@ class View:
     camera: object
     support: object
 
+    def __post_init__(self) -> None:
+        support_size = tuple(getattr(self.support, "size", ()))
+        camera_size = tuple(self.camera.size)
+        if support_size != camera_size:
+            raise InputError(
+                f"camera {getattr(self.camera, 'name', '?')!r}: the support image (mask) is "
+                f"{support_size[0]} x {support_size[1]} px but the camera's image is "
+                f"{camera_size[0]} x {camera_size[1]} px (width x height)"
+            )
+
 
 class ImageTask(GradientTask):
     """Maximise the overlap h(q) of the projected skeleton segments with the views' supports.

@@ -1,0 +1,111 @@
+import warnings
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from ibik_pin.cameras import look_at_camera
+from ibik_pin.configuration import Configuration
+from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
+from ibik_pin.images import SupportImage, support_from_mask
+from ibik_pin.render import render_capsules
+from ibik_pin.tasks import ImageTask, View
+from ibik_pin.virtual import make_scene, render_chain
+from tests.conftest import random_human_configuration
+
+
+def central_difference_gradient(task, model, q, eps=1e-6):
+    gradient = np.zeros(model.nv)
+    for k in range(model.nv):
+        dv = np.zeros(model.nv)
+        dv[k] = eps
+        plus = task.compute_value(Configuration(model, pin.integrate(model, q, dv)))
+        minus = task.compute_value(Configuration(model, pin.integrate(model, q, -dv)))
+        gradient[k] = (plus - minus) / (2 * eps)
+    return gradient
+
+
+def smooth_support(mask, sigma_px):
+    """A smooth support: the signed distance without cap, blurred wide."""
+    return support_from_mask(mask, inside_cap_px=None, smooth_sigma_px=sigma_px)
+
+
+def test_the_criterion_gradient_matches_finite_differences_on_the_planar_chain():
+    scene = make_scene(np.array([0.9, -0.7, -0.6, 0.5]))
+    support = smooth_support(scene.silhouette, 4.0)
+    task = ImageTask(scene.body, [View(scene.camera, support)], samples_per_segment=10)
+    q = np.array([0.4, 0.3, -0.9, 0.7])
+    analytic = task.compute_gradient(Configuration(scene.body.model, q))
+    numeric = central_difference_gradient(task, scene.body.model, q)
+    assert np.linalg.norm(numeric - analytic) / np.linalg.norm(analytic) <= 1e-4
+
+
+def human_views(human, q):
+    """Two cameras around the posed human, each with a smooth support of its rendered silhouette."""
+    configuration = Configuration(human.model, q)
+    ends = configuration.frame_positions(human.segment_frame_ids.reshape(-1)).reshape(-1, 2, 3)
+    center = configuration.frame_position(human.frame_id("Hip"))
+    views = []
+    for name, eye in [("front", center + [3.5, 0.3, 0.5]), ("side", center + [0.4, 0.5, -3.8])]:
+        camera = look_at_camera(name, (320, 240), 300.0, eye, center, np.array([0.0, 1.0, 0.0]))
+        mask = render_capsules(camera, ends[:, 0], ends[:, 1], human.segment_radii)
+        views.append(View(camera, smooth_support(mask, 3.0)))
+    return views
+
+
+def test_the_criterion_gradient_matches_finite_differences_on_the_human_with_two_cameras(human, rng):
+    silhouette_q = random_human_configuration(human, rng, spread=0.3)
+    q = random_human_configuration(human, rng, spread=0.3)
+    q[:7] = silhouette_q[:7]
+    task = ImageTask(human, human_views(human, silhouette_q), samples_per_segment=6)
+    analytic = task.compute_gradient(Configuration(human.model, q))
+    numeric = central_difference_gradient(task, human.model, q)
+    assert analytic.shape == (42,)
+    assert np.linalg.norm(numeric - analytic) / np.linalg.norm(analytic) <= 1e-4
+
+
+def test_the_objective_pose_overlaps_better_than_another(human, rng):
+    silhouette_q = random_human_configuration(human, rng, spread=0.3)
+    task = ImageTask(human, human_views(human, silhouette_q))
+    other = random_human_configuration(human, rng, spread=0.3)
+    other[:7] = silhouette_q[:7]
+    assert task.compute_value(Configuration(human.model, silhouette_q)) > task.compute_value(
+        Configuration(human.model, other)
+    )
+
+
+def test_an_empty_silhouette_disables_its_view_with_a_warning():
+    scene = make_scene(np.zeros(4))
+    with pytest.warns(EmptySilhouetteWarning):
+        empty = support_from_mask(np.zeros((400, 400), dtype=bool))
+    with pytest.warns(EmptySilhouetteWarning, match="image term is disabled for this view"):
+        task = ImageTask(scene.body, [View(scene.camera, empty), View(scene.camera, scene.support)])
+    assert task.enabled
+    configuration = Configuration(scene.body.model, np.zeros(4))
+    only_full = ImageTask(scene.body, [View(scene.camera, scene.support)])
+    assert task.compute_value(configuration) == pytest.approx(only_full.compute_value(configuration))
+
+
+def test_all_views_empty_disables_the_task_without_crashing():
+    scene = make_scene(np.zeros(4))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", EmptySilhouetteWarning)
+        empty = support_from_mask(np.zeros((400, 400), dtype=bool))
+        task = ImageTask(scene.body, [View(scene.camera, empty)])
+    assert not task.enabled
+
+
+def test_a_support_whose_size_differs_from_the_camera_is_refused():
+    scene = make_scene(np.zeros(4))
+    small = SupportImage(np.zeros((240, 320), dtype=np.float32))
+    with pytest.raises(InputError, match=r"camera 'virtual': the support image \(mask\) is 320 x 240 px"):
+        View(scene.camera, small)
+
+
+def test_the_chain_on_its_own_silhouette_scores_the_inside_cap():
+    q = np.array([0.9, -0.7, -0.6, 0.5])
+    scene = make_scene(q, inside_cap_px=3.0)
+    task = ImageTask(scene.body, [View(scene.camera, scene.support)])
+    value = task.compute_value(Configuration(scene.body.model, q))
+    assert 1.5 < value <= 3.0
+    assert render_chain(scene.body, scene.camera, q).sum() > 0
