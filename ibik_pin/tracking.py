@@ -1,0 +1,240 @@
+"""Tracking a recorded sequence, frame after frame, each frame warm-started from the previous one.
+
+Every keypoint present in the targets is an end-effector target (level 1: pelvis and legs, level 2:
+trunk, head and arms); the image criterion is level 3 and a light posture prior level 4. With
+`use_image=False` the identical solve runs without the image level: the blind PIK baseline (same
+targets, iterations, initial state and limits).
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+import pinocchio as pin
+
+from .configuration import Configuration
+from .exceptions import EmptySilhouetteWarning, InputError
+from .images import support_from_mask
+from .limits import JointLimits
+from .model import BodyModel
+from .solvers import make_solver
+from .tasks import FramePositionTask, ImageTask, PostureTask, View
+
+LOWER_BODY = {"Hip", "LHip", "RHip", "LKnee", "RKnee", "LAnkle", "RAnkle", "LBigToe", "LSmallToe",
+              "LHeel", "RBigToe", "RSmallToe", "RHeel"}
+LIMB_HALF_WIDTH = 0.04  # [m] the support's inside cap, in pixels at the subject's distance (DESIGN.md)
+
+# A frame's silhouettes: one (H, W) bool mask per camera, in the cameras' order.
+SilhouetteSource = Callable[[int], Sequence[np.ndarray]]
+
+
+@dataclass
+class TrackingSettings:
+    """How each frame is solved.
+
+    Attributes:
+        method: solver scheme: "qp" (default), "stack", "liegeois" or "ik".
+        iterations: solver steps per frame (the paper: 15).
+        first_frame_iterations: steps for the first frame, which starts from the neutral pose.
+        use_image: False gives the blind baseline (PIK with "qp"/"stack", IK with "ik").
+        samples_per_segment: n of eq. (5).
+        image_step: largest image step per iteration [rad].
+        posture_weight: weight of the posture prior (lowest level).
+    """
+
+    method: str = "qp"
+    iterations: int = 15
+    first_frame_iterations: int = 100
+    use_image: bool = True
+    samples_per_segment: int = 6
+    image_step: float = 0.05
+    posture_weight: float = 1e-2
+
+
+@dataclass
+class TrackingResult:
+    """The motion and what happened while solving it.
+
+    Attributes:
+        q: (F, nq) configurations [m, rad].
+        keypoint_names: every keypoint of the body.
+        keypoints: (F, K, 3) world positions of those keypoints [m].
+        target_residuals: (F,) mean distance of the present targets to their keypoints [m].
+        overlap: (F, V) the criterion of each view at the solution (NaN where disabled).
+        limit_hits: per frame, the joints at a limit.
+        dropped_targets: per frame, the targets absent (NaN) in that frame.
+        disabled_views: per frame, the cameras whose silhouette was empty.
+        solve_seconds: wall time of the solves alone [s].
+    """
+
+    q: np.ndarray
+    keypoint_names: list[str]
+    keypoints: np.ndarray
+    target_residuals: np.ndarray
+    overlap: np.ndarray
+    limit_hits: list[list[str]] = field(default_factory=list)
+    dropped_targets: list[list[str]] = field(default_factory=list)
+    disabled_views: list[list[str]] = field(default_factory=list)
+    solve_seconds: float = 0.0
+
+    @property
+    def frames_per_second(self) -> float:
+        return len(self.q) / self.solve_seconds if self.solve_seconds > 0 else float("nan")
+
+
+def initial_configuration(body: BodyModel, names: list[str], targets: np.ndarray) -> np.ndarray:
+    """The neutral pose placed on the pelvis target and turned to face where the hips say.
+
+    Args:
+        names: target names; targets: (K, 3) [m] in the model's frame (Y up), NaN where absent.
+    """
+    q = pin.neutral(body.model)
+    present = {name: targets[k] for k, name in enumerate(names) if np.all(np.isfinite(targets[k]))}
+    if "Hip" in present:
+        q[:3] = present["Hip"]
+    elif "LHip" in present and "RHip" in present:
+        q[:3] = 0.5 * (present["LHip"] + present["RHip"])
+    elif present:
+        q[:3] = np.mean(list(present.values()), axis=0)
+    if "LHip" in present and "RHip" in present:
+        right = present["RHip"] - present["LHip"]  # the model's +Z points to its right
+        right[1] = 0.0
+        if np.linalg.norm(right) > 1e-6:
+            z_axis = right / np.linalg.norm(right)
+            y_axis = np.array([0.0, 1.0, 0.0])
+            rotation = np.column_stack([np.cross(y_axis, z_axis), y_axis, z_axis])
+            q[3:7] = pin.Quaternion(rotation).coeffs()
+    return q
+
+
+def support_caps(cameras: Sequence, subject_position: np.ndarray) -> list[float]:
+    """Inside cap [px] of each view's support: a limb's half width seen at the subject's distance."""
+    caps = []
+    for camera in cameras:
+        radius = camera.pixel_radius(subject_position[None], np.array([LIMB_HALF_WIDTH]))
+        caps.append(float(max(radius[0], 1.0)))
+    return caps
+
+
+class Tracker:
+    """Solves a sequence of frames with one body, one camera set and one solver kept alive."""
+
+    def __init__(self, body: BodyModel, cameras: Sequence = (), settings: TrackingSettings | None = None):
+        self.body = body
+        self.cameras = list(cameras)
+        self.settings = settings or TrackingSettings()
+        model = body.model
+        self.limits = JointLimits(model)
+        self.solver = make_solver(self.settings.method, limits=self.limits)
+        self.posture = PostureTask(model, weight=self.settings.posture_weight)
+        self.image_task = ImageTask(body, (), samples_per_segment=self.settings.samples_per_segment,
+                                    max_step_size=self.settings.image_step)
+        self._target_tasks: dict[str, FramePositionTask] = {}
+
+    def _levels(self, names: list[str]) -> list[list]:
+        for name in names:
+            if name not in self._target_tasks:
+                self._target_tasks[name] = FramePositionTask(self.body.model, self.body.keypoints[name])
+        lower = [self._target_tasks[n] for n in names if n in LOWER_BODY]
+        upper = [self._target_tasks[n] for n in names if n not in LOWER_BODY]
+        levels = [lower, upper]
+        if self.settings.use_image and self.cameras:
+            levels.append([self.image_task])
+        levels.append([self.posture])
+        return levels
+
+    def track(
+        self,
+        names: list[str],
+        targets: np.ndarray,
+        silhouettes: SilhouetteSource | None = None,
+        progress: Callable[[], None] | None = None,
+    ) -> TrackingResult:
+        """Solve every frame.
+
+        Args:
+            names: target keypoint names (each must be a keypoint of the body).
+            targets: (F, K, 3) target positions [m] in the model's frame; NaN = absent that frame.
+            silhouettes: frame index -> one mask per camera; needed when the image is used.
+            progress: called once per solved frame.
+        """
+        unknown = [name for name in names if name not in self.body.keypoints]
+        if unknown:
+            raise InputError(
+                f"unknown keypoint name(s) {', '.join(unknown)}; known keypoints: "
+                + ", ".join(self.body.keypoints)
+            )
+        targets = np.asarray(targets, dtype=float)
+        if targets.ndim != 3 or targets.shape[1:] != (len(names), 3):
+            raise InputError(f"targets must have shape (F, {len(names)}, 3), got {targets.shape}")
+        use_image = self.settings.use_image and bool(self.cameras)
+        if use_image and silhouettes is None:
+            raise InputError("the image criterion needs silhouettes: give masks or videos, or --no-image")
+        frame_count = targets.shape[0]
+        levels = self._levels(names)
+        keypoint_names = list(self.body.keypoints)
+        keypoint_ids = self.body.frame_ids(keypoint_names)
+        result = TrackingResult(
+            q=np.zeros((frame_count, self.body.model.nq)),
+            keypoint_names=keypoint_names,
+            keypoints=np.zeros((frame_count, len(keypoint_names), 3)),
+            target_residuals=np.zeros(frame_count),
+            overlap=np.full((frame_count, len(self.cameras)), np.nan),
+        )
+        configuration = Configuration(self.body.model, initial_configuration(self.body, names, targets[0]))
+        caps = support_caps(self.cameras, configuration.q[:3]) if use_image else []
+        for frame in range(frame_count):
+            present = np.all(np.isfinite(targets[frame]), axis=1)
+            for k, name in enumerate(names):
+                self._target_tasks[name].set_target(targets[frame, k] if present[k] else None)
+            result.dropped_targets.append([n for n, p in zip(names, present) if not p])
+            disabled = []
+            if use_image:
+                views, disabled = self._views(silhouettes(frame), caps)
+                with warnings.catch_warnings():  # empty views are reported per frame instead
+                    warnings.simplefilter("ignore", EmptySilhouetteWarning)
+                    self.image_task.set_views(views)
+            result.disabled_views.append(disabled)
+            iterations = self.settings.first_frame_iterations if frame == 0 else self.settings.iterations
+            started = time.perf_counter()
+            self.solver.solve(configuration, levels, iterations=iterations)
+            result.solve_seconds += time.perf_counter() - started
+            result.q[frame] = configuration.q
+            result.keypoints[frame] = configuration.frame_positions(keypoint_ids)
+            errors = [np.linalg.norm(self._target_tasks[n].compute_error(configuration))
+                      for n, p in zip(names, present) if p]
+            result.target_residuals[frame] = np.mean(errors) if errors else np.nan
+            if use_image:
+                result.overlap[frame] = self._overlap_per_view(configuration, disabled)
+            result.limit_hits.append(self.limits.at_limit(configuration.q))
+            if progress is not None:
+                progress()
+        return result
+
+    def _views(self, masks: Sequence[np.ndarray], caps: list[float]) -> tuple[list[View], list[str]]:
+        if len(masks) != len(self.cameras):
+            raise InputError(f"expected one silhouette per camera ({len(self.cameras)}), got {len(masks)}")
+        views, disabled = [], []
+        for camera, mask, cap in zip(self.cameras, masks, caps):
+            with warnings.catch_warnings():  # empty views are reported per frame instead
+                warnings.simplefilter("ignore", EmptySilhouetteWarning)
+                support = support_from_mask(mask, inside_cap_px=cap)
+            if not support.enabled:
+                disabled.append(camera.name)
+            views.append(View(camera, support))
+        return views, disabled
+
+    def _overlap_per_view(self, configuration: Configuration, disabled: list[str]) -> np.ndarray:
+        points = self.image_task.sample_points(configuration)
+        overlap = np.full(len(self.cameras), np.nan)
+        for index, view in enumerate(self.image_task.views):
+            if view.camera.name in disabled:
+                continue
+            pixels = view.camera.project(points)
+            overlap[index] = float(np.mean(view.support.sample(pixels).values))
+        return overlap
+
