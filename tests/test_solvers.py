@@ -164,8 +164,9 @@ def test_an_unknown_solver_name_lists_the_available_ones():
 
 
 def test_qp_objects_are_kept_between_steps(human):
-    levels = human_levels(human, pin.neutral(human.model))
-    solver = HierarchicalQPSolver(limits=JointLimits(human.model))
+    levels = human_levels(human, random_human_configuration(human, np.random.default_rng(1)))
+    # Per-step bounds so small that every level's unconstrained step violates them: QP each time.
+    solver = HierarchicalQPSolver(limits=JointLimits(human.model, max_step=1e-3, max_root_translation=1e-3))
     configuration = Configuration(human.model)
     solver.compute_step(configuration, levels)
     first = {level: entry[1] for level, entry in solver._qps.items()}

@@ -10,9 +10,11 @@ Without an active bound this is exactly the projection stack's step. Every level
 (w = 0 satisfies it); one whose target the bounds or higher levels forbid ends with a residual,
 reported "relaxed" (the least-squares relaxation).
 
-One proxsuite dense QP object per level is created once and updated, warm-started from its previous
-result across iterations and frames; it is rebuilt only when a level's size changes (a target
-dropped for a frame). A backend failure skips that level (reported "failed"), never raises.
+A level whose unconstrained optimum (the projection stack's step, one SVD away) already respects
+every bound needs no QP. Otherwise one proxsuite dense QP object per level, created once and
+updated, is warm-started from its previous result across iterations and frames; it is rebuilt only
+when a level's size changes (a target dropped for a frame). A backend failure skips that level
+(reported "failed"), never raises.
 """
 
 from __future__ import annotations
@@ -96,19 +98,25 @@ class HierarchicalQPSolver(Solver):
                 reduced = unit_reduced_direction(null_basis, level.direction)
                 if reduced is None:
                     continue
-                hessian = np.eye(size) / level.step_size
-                linear = -reduced
+                unconstrained = level.step_size * reduced
                 remaining = remove_direction(reduced)
             else:
                 projected = level.A @ null_basis
                 residual = level.b - level.A @ dq
-                hessian = projected.T @ projected + self.damping**2 * np.eye(size)
-                linear = -projected.T @ residual
-                remaining = damped_solve(projected, residual, self.damping)[1]
-            w = self._solve_level(index, hessian, linear, null_basis, lower - dq, upper - dq)
-            if w is None:
-                failed.add(index)
-                continue
+                unconstrained, remaining = damped_solve(projected, residual, self.damping)
+            candidate = dq + null_basis @ unconstrained
+            if np.all(candidate >= lower) and np.all(candidate <= upper):
+                w = unconstrained  # no bound active: the QP's optimum is the projection stack's step
+            else:
+                if isinstance(level, GradientLevel):
+                    hessian, linear = np.eye(size) / level.step_size, -reduced
+                else:
+                    hessian = projected.T @ projected + self.damping**2 * np.eye(size)
+                    linear = -projected.T @ residual
+                w = self._solve_level(index, hessian, linear, null_basis, lower - dq, upper - dq)
+                if w is None:
+                    failed.add(index)
+                    continue
             # proxsuite meets the bounds to eps_abs; clip so the limits hold exactly.
             dq = np.clip(dq + null_basis @ w, lower, upper)
             null_basis = null_basis @ remaining
@@ -139,16 +147,17 @@ class HierarchicalQPSolver(Solver):
 
 
 def _independent_rows(constraint: np.ndarray, candidates: list[int]) -> list[int]:
-    """The candidates, in order, whose rows are linearly independent of the earlier ones."""
-    chosen, basis = [], []
-    for index in candidates:  # Gram-Schmidt
-        row = constraint[index]
-        residual = row - sum((q @ row) * q for q in basis) if basis else row
-        norm = np.linalg.norm(residual)
-        if norm > 1e-9 * max(np.linalg.norm(row), 1e-300):
-            basis.append(residual / norm)
-            chosen.append(index)
-    return chosen
+    """The candidates, in order, whose rows are linearly independent of the earlier ones.
+
+    |R_jj| of the QR factorisation of the rows (as columns) is the distance of row j to the span of
+    the rows before it.
+    """
+    if not candidates:
+        return []
+    rows = constraint[candidates]
+    diagonal = np.abs(np.diag(np.linalg.qr(rows.T, mode="r")))
+    scale = np.linalg.norm(rows, axis=1)[: diagonal.size]
+    return [index for index, distance, norm in zip(candidates, diagonal, scale) if distance > 1e-9 * norm]
 
 
 def _polish(w, multipliers, hessian, linear, constraint, lower, upper, rounds: int = 6) -> np.ndarray:
