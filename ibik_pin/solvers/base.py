@@ -140,7 +140,7 @@ class Solver(ABC):
 
     Attributes:
         limits: joint limits, or None. The QP enforces them as constraints at every level; the
-            projection schemes clip the configuration into them after each step.
+            projection schemes lock a coordinate that would leave them and solve again.
     """
 
     name = "solver"

@@ -43,8 +43,26 @@ class PriorityStackSolver(Solver):
     def compute_step(self, configuration: Configuration, levels: Levels) -> StepResult:
         built = build_levels(configuration, self.arrange(levels))
         nv = configuration.nv
-        dq = np.zeros(nv)
-        null_basis = np.eye(nv)  # Z_{k-1}: orthonormal basis of the remaining null space
+        if self.limits is None:
+            dq = self._project(built, np.zeros(nv), np.eye(nv))
+            return StepResult(dq, report_levels(built, dq))
+        # Joint limits by clamping (Baerlocher & Boulic 2004): a coordinate whose step leaves its
+        # bounds is locked on the bound and taken out of every level, and the stack is solved again.
+        lower, upper = self.limits.step_bounds(configuration.q)
+        locked = np.zeros(nv, dtype=bool)
+        fixed = np.zeros(nv)
+        for _ in range(nv):
+            dq = self._project(built, fixed.copy(), np.eye(nv)[:, ~locked])
+            leaving = ~locked & ((dq < lower) | (dq > upper))
+            if not leaving.any():
+                break
+            fixed[leaving] = np.clip(dq[leaving], lower[leaving], upper[leaving])
+            locked |= leaving
+        dq = np.clip(dq, lower, upper)
+        return StepResult(dq, report_levels(built, dq))
+
+    def _project(self, built: list, dq: np.ndarray, null_basis: np.ndarray) -> np.ndarray:
+        """The recursive stack from a partial step dq over the coordinates spanned by null_basis."""
         for level in built:
             if level is None or null_basis.shape[1] == 0:
                 continue
@@ -60,12 +78,7 @@ class PriorityStackSolver(Solver):
             w, remaining = damped_solve(level.A @ null_basis, level.b - level.A @ dq, self.damping)
             dq += null_basis @ w
             null_basis = null_basis @ remaining
-        if self.limits is not None:
-            # Scale the whole step (every level alike, so priorities hold) into the per-step bounds.
-            largest = np.max(np.abs(dq) / self.limits.step)
-            if largest > 1.0:
-                dq /= largest
-        return StepResult(dq, report_levels(built, dq))
+        return dq
 
 
 def _merge_least_squares(levels: Levels) -> list[list]:
