@@ -17,13 +17,12 @@ Calibration files follow Pose2Sim's TOML format: one section per camera with the
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
 import re
 import sys
-import tempfile
-import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple, Sequence, Union
@@ -32,6 +31,7 @@ import cv2
 import numpy as np
 
 from ibik_pin.exceptions import FileFormatError, InputError, UnknownNameError
+from ibik_pin.io.motion import write_text_atomically
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -623,15 +623,7 @@ def write_calibration(path: PathLike, cameras: Sequence[PinholeCamera]) -> None:
     if not seen:
         raise InputError("cameras: expected at least one camera, found none")
     lines += ["[metadata]", "adjusted = false", "error = 0.0", ""]
-    descriptor, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(descriptor, "w", encoding="utf-8") as stream:
-            stream.write("\n".join(lines))
-        os.replace(temporary, path)
-    except BaseException:
-        if os.path.exists(temporary):
-            os.unlink(temporary)
-        raise
+    write_text_atomically(path, "\n".join(lines))
 
 
 # Pose2Sim writes TRC files Y-up while its calibration's world is Z-up: a TRC point (x, y, z) is the

@@ -1,0 +1,98 @@
+"""The `ibik` command: `ibik track` on the user's files, `ibik demo` on data the repository ships.
+
+Bad input ends with one line on stderr and exit code 2; nothing half-written is left in OUTDIR.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from .exceptions import IbikError
+from .pipeline import TrackJob, run_track
+from .solvers import SOLVERS
+from .tracking import TrackingSettings
+
+
+def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--targets", type=Path, required=True,
+                        help="OpenSim TRC of 3D keypoints (Pose2Sim names), m or mm")
+    parser.add_argument("--static", type=Path, help="TRC of a static trial, to scale the model")
+    parser.add_argument("--calibration", type=Path, help="Pose2Sim calibration TOML")
+    sources = parser.add_mutually_exclusive_group()
+    sources.add_argument("--masks", type=Path, help="folder with one sub-folder of masks per camera")
+    sources.add_argument("--videos", type=Path, help="folder with one video per camera")
+    parser.add_argument("--background", type=Path, help="frames of the empty scene (with --videos)")
+    parser.add_argument("--cameras", help="comma-separated subset of the calibration's cameras")
+    parser.add_argument("--model", type=Path, help="URDF of the human (default: example-robot-data's)")
+    parser.add_argument("--method", choices=sorted(SOLVERS), default="qp",
+                        help="solver scheme (default: qp, the hierarchical QP with joint limits)")
+    parser.add_argument("--no-image", action="store_true",
+                        help="the same solve without the image criterion (blind baseline)")
+    parser.add_argument("--iterations", type=int, default=15, help="solver steps per frame")
+    parser.add_argument("--overlay", action="store_true",
+                        help="also write overlay videos, a residual plot and an HTML 3D replay")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--out", type=Path, required=True, help="output folder")
+
+
+def _job(arguments: argparse.Namespace) -> TrackJob:
+    if arguments.iterations < 1:
+        raise IbikError(f"--iterations must be >= 1, got {arguments.iterations}")
+    if arguments.background is not None and arguments.videos is None:
+        raise IbikError("--background goes with --videos")
+    return TrackJob(
+        targets=arguments.targets,
+        out=arguments.out,
+        static=arguments.static,
+        calibration=arguments.calibration,
+        masks=arguments.masks,
+        videos=arguments.videos,
+        background=arguments.background,
+        cameras=[name.strip() for name in arguments.cameras.split(",")] if arguments.cameras else None,
+        model=arguments.model,
+        settings=TrackingSettings(method=arguments.method, iterations=arguments.iterations,
+                                  use_image=not arguments.no_image),
+        overlay=arguments.overlay,
+        quiet=arguments.quiet,
+    )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="ibik", description="Image-constrained inverse kinematics "
+                                     "for markerless human motion capture")
+    commands = parser.add_subparsers(dest="command", required=True)
+    track = commands.add_parser("track", help="track a recorded sequence")
+    _add_track_arguments(track)
+    demo = commands.add_parser("demo", help="track the bundled real motion, with and without image")
+    demo.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder")
+    demo.add_argument("--quiet", action="store_true", help="no progress bar")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    arguments = build_parser().parse_args(argv)
+    try:
+        if arguments.command == "track":
+            report = run_track(_job(arguments))
+            if not arguments.quiet:
+                print(f"wrote {arguments.out}: {report['frames']} frames at "
+                      f"{report['solve_frames_per_second']:.1f} frames/s, mean end-effector residual "
+                      f"{1000 * report['end_effector_residual_m']['mean']:.1f} mm")
+        else:
+            from .demo import run_demo
+
+            run_demo(arguments.out, quiet=arguments.quiet)
+    except (IbikError, OSError) as error:
+        message = " ".join(str(error).split())  # one line, whatever the message held
+        print(f"ibik: error: {message}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("ibik: interrupted", file=sys.stderr)
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

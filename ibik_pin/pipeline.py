@@ -1,0 +1,313 @@
+"""`ibik track` as a function: read the user's files, check them, track, write every output.
+
+Inputs are checked before any solving (names, frame counts, camera names, image sizes), and the
+outputs are written into a temporary folder beside OUTDIR that replaces it only at the very end, so
+a failure never leaves an OUTDIR that looks complete and never destroys a previous one half-way.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from .cameras import POSE2SIM_TRC_TO_WORLD, cameras_in_frame, read_calibration, select_cameras
+from .exceptions import FileFormatError, InputError
+from .images import (
+    IMAGE_SUFFIXES,
+    VideoReader,
+    list_mask_files,
+    read_mask,
+    silhouettes_from_video,
+)
+from .io.export import write_model_bvh, write_model_mot, write_q_csv
+from .io.trc import TrcData, read_trc, write_trc
+from .model import BodyModel, load_human
+from .progress import ProgressBar
+from .report import plot_series, write_html_replay, write_overlay_video
+from .scaling import scale_from_stature, scale_human, segment_lengths_from_keypoints
+from .tracking import Tracker, TrackingResult, TrackingSettings
+
+VIDEO_SUFFIXES = {".mp4", ".avi", ".mov", ".mkv", ".m4v"}
+UNIT_TO_METRES = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+# The keypoints joints.trc always holds (estimated ones included), then any other of the model's.
+OUTPUT_KEYPOINTS = ["Hip", "Neck", "Head", "LShoulder", "LElbow", "LWrist", "RShoulder", "RElbow",
+                    "RWrist", "LHip", "LKnee", "LAnkle", "RHip", "RKnee", "RAnkle"]
+
+
+@dataclass
+class TrackJob:
+    """Everything `ibik track` was asked to do (paths as given on the command line)."""
+
+    targets: Path
+    out: Path
+    static: Path | None = None
+    calibration: Path | None = None
+    masks: Path | None = None
+    videos: Path | None = None
+    background: Path | None = None
+    cameras: list[str] | None = None
+    model: Path | None = None
+    settings: TrackingSettings = field(default_factory=TrackingSettings)
+    overlay: bool = False
+    quiet: bool = False
+
+
+@dataclass
+class Silhouettes:
+    """Per camera, either mask files (read lazily) or decoded video silhouettes."""
+
+    mask_files: list[list[Path]] | None
+    video_masks: list[list[np.ndarray]] | None
+    sizes: list[tuple[int, int]]
+
+    @property
+    def frame_count(self) -> int:
+        source = self.mask_files if self.mask_files is not None else self.video_masks
+        return len(source[0]) if source else 0
+
+    def mask(self, index: int, camera: int) -> np.ndarray:
+        """Frame `index`'s (H, W) bool silhouette in camera number `camera`."""
+        if self.mask_files is not None:
+            return read_mask(self.mask_files[camera][index], self.sizes[camera])
+        return self.video_masks[camera][index]
+
+    def frame(self, index: int) -> list[np.ndarray]:
+        """Frame `index`'s silhouettes, one per camera."""
+        return [self.mask(index, camera) for camera in range(len(self.sizes))]
+
+
+def _trc_in_metres(path: Path) -> tuple[TrcData, np.ndarray]:
+    data = read_trc(path)
+    if data.units not in UNIT_TO_METRES:
+        raise FileFormatError(f"{path}: units {data.units!r} are not one of m, cm, mm")
+    return data, data.positions * UNIT_TO_METRES[data.units]
+
+
+def _check_names(path: Path, names: Sequence[str], body: BodyModel) -> None:
+    unknown = [name for name in names if name not in body.keypoints]
+    if unknown:
+        raise InputError(
+            f"{path}: unknown keypoint name(s) {', '.join(unknown)}; known keypoints: "
+            + ", ".join(body.keypoints)
+        )
+
+
+def _camera_folder_entries(folder: Path, names: list[str], kind: str) -> dict[str, Path]:
+    if not folder.is_dir():
+        raise FileFormatError(f"--{kind} {folder}: not a folder")
+    entries = {}
+    for name in names:
+        if kind == "masks":
+            match = folder / name
+            if not match.is_dir():
+                raise FileFormatError(f"--masks {folder}: no sub-folder {name!r} for camera {name!r}")
+        else:
+            candidates = sorted(p for p in folder.iterdir()
+                                if p.suffix.lower() in VIDEO_SUFFIXES and p.name.startswith(name))
+            if not candidates:
+                raise FileFormatError(f"--videos {folder}: no video whose file name starts with {name!r}")
+            match = candidates[0]
+        entries[name] = match
+    return entries
+
+
+def load_silhouettes(job: TrackJob, cameras: list, frame_count: int, progress: bool) -> Silhouettes:
+    """Mask files or video silhouettes for every camera, checked against the targets' frame count."""
+    names = [camera.name for camera in cameras]
+    sizes = [tuple(camera.size) for camera in cameras]
+    if job.masks is not None:
+        folders = _camera_folder_entries(job.masks, names, "masks")
+        files = [list_mask_files(folders[name]) for name in names]
+        for name, listed, size in zip(names, files, sizes):
+            if len(listed) != frame_count:
+                raise InputError(f"--masks {folders[name]}: {len(listed)} masks for camera {name!r} "
+                                 f"but the targets have {frame_count} frames")
+            read_mask(listed[0], size)  # size and readability, before any solving
+        return Silhouettes(files, None, sizes)
+    videos = _camera_folder_entries(job.videos, names, "videos")
+    backgrounds: dict[str, list[Path]] = {name: [] for name in names}
+    if job.background is not None:
+        if not job.background.is_dir():
+            raise FileFormatError(f"--background {job.background}: not a folder")
+        for path in sorted(job.background.iterdir()):
+            for name in names:
+                if path.name.startswith(name) and path.suffix.lower() in IMAGE_SUFFIXES | VIDEO_SUFFIXES:
+                    backgrounds[name].append(path)
+    masks = []
+    with ProgressBar(len(names), "silhouettes", enabled=progress) as bar:
+        for name, size in zip(names, sizes):
+            with VideoReader(videos[name]) as reader:
+                if tuple(reader.size) != size:
+                    raise InputError(f"--videos {videos[name]}: frames are {reader.size[0]} x "
+                                     f"{reader.size[1]} px but camera {name!r} is {size[0]} x {size[1]} px")
+            camera_masks = silhouettes_from_video(videos[name], backgrounds[name] or None)
+            if len(camera_masks) != frame_count:
+                raise InputError(f"--videos {videos[name]}: {len(camera_masks)} frames but the targets "
+                                 f"have {frame_count} frames")
+            masks.append(camera_masks)
+            bar.update()
+    return Silhouettes(None, masks, sizes)
+
+
+def prepare_body(job: TrackJob, names: list[str], targets_m: np.ndarray) -> BodyModel:
+    """The human (or --model), scaled from the static trial or from the targets' stature."""
+    body = load_human(job.model) if job.model is not None else load_human()
+    _check_names(job.targets, names, body)
+    if job.static is not None:
+        static, static_m = _trc_in_metres(job.static)
+        _check_names(job.static, static.marker_names, body)
+        lengths = segment_lengths_from_keypoints(static.marker_names, static_m)
+        return scale_human(body, lengths)
+    lengths = segment_lengths_from_keypoints(names, targets_m)
+    if lengths:
+        return scale_human(body, lengths)
+    stature = _stature(names, targets_m)
+    return scale_from_stature(body, stature) if np.isfinite(stature) else body
+
+
+def _stature(names: list[str], targets_m: np.ndarray) -> float:
+    """Head height above the lowest foot point, median over frames [m] (NaN if not measurable)."""
+    if "Head" not in names:
+        return float("nan")
+    head = targets_m[:, names.index("Head"), 1]
+    feet = [names.index(n) for n in names if n in {"LAnkle", "RAnkle", "LHeel", "RHeel", "LBigToe", "RBigToe"}]
+    if not feet:
+        return float("nan")
+    lowest = np.nanmin(targets_m[:, feet, 1], axis=1)
+    return float(np.nanmedian(head - lowest))
+
+
+def run_track(job: TrackJob) -> dict:
+    """Run the whole job; returns the report that was written to OUTDIR/report.json."""
+    trc, targets_m = _trc_in_metres(job.targets)
+    names = list(trc.marker_names)
+    frame_count = targets_m.shape[0]
+    if frame_count == 0:
+        raise InputError(f"--targets {job.targets}: no frame")
+    body = prepare_body(job, names, targets_m)
+    cameras: list = []
+    silhouettes = None
+    use_image = job.settings.use_image
+    if job.calibration is not None:
+        cameras = cameras_in_frame(read_calibration(job.calibration), POSE2SIM_TRC_TO_WORLD)
+        if job.cameras:
+            cameras = select_cameras(cameras, job.cameras)
+    if use_image:
+        if not cameras:
+            raise InputError("the image criterion needs --calibration with --masks or --videos "
+                             "(or pass --no-image for the blind baseline)")
+        if job.masks is None and job.videos is None:
+            raise InputError("the image criterion needs --masks or --videos (or pass --no-image)")
+        silhouettes = load_silhouettes(job, cameras, frame_count, not job.quiet)
+    elif job.overlay and cameras and (job.masks is not None or job.videos is not None):
+        silhouettes = load_silhouettes(job, cameras, frame_count, not job.quiet)
+
+    settings = job.settings
+    tracker = Tracker(body, cameras if use_image else [], settings)
+    with ProgressBar(frame_count, "tracking", enabled=not job.quiet) as bar:
+        result = tracker.track(names, targets_m, silhouettes.frame if use_image else None,
+                               progress=bar.update)
+
+    job.out.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{job.out.name}.", dir=job.out.parent))
+    umask = os.umask(0)
+    os.umask(umask)
+    staging.chmod(0o777 & ~umask)  # mkdtemp's 0700 would make OUTDIR private
+    try:
+        report = write_outputs(staging, job, trc, body, cameras, silhouettes, result)
+        _replace_folder(staging, job.out)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return report
+
+
+def _replace_folder(staging: Path, out: Path) -> None:
+    """Move the finished staging folder to OUTDIR; an existing OUTDIR is replaced only now."""
+    if out.exists():
+        previous = out.with_name(f".{out.name}.previous")
+        shutil.rmtree(previous, ignore_errors=True)
+        os.replace(out, previous)
+        os.replace(staging, out)
+        shutil.rmtree(previous, ignore_errors=True)
+    else:
+        os.replace(staging, out)
+
+
+def write_outputs(folder: Path, job: TrackJob, trc: TrcData, body: BodyModel, cameras: list,
+                  silhouettes: Silhouettes | None, result: TrackingResult) -> dict:
+    """joints.trc, q.csv, motion.mot, motion.bvh, report.json (and the overlays) into `folder`."""
+    times = np.asarray(trc.times, dtype=float)
+    frame_rate = float(trc.data_rate)
+    keypoints = OUTPUT_KEYPOINTS + [n for n in result.keypoint_names if n not in OUTPUT_KEYPOINTS]
+    indices = [result.keypoint_names.index(n) for n in keypoints]
+    scale = 1.0 / UNIT_TO_METRES[trc.units]
+    write_trc(folder / "joints.trc", TrcData(
+        marker_names=keypoints, times=times, positions=result.keypoints[:, indices] * scale,
+        units=trc.units, data_rate=frame_rate, frame_numbers=trc.frame_numbers,
+    ))
+    write_q_csv(folder / "q.csv", body.model, times, result.q)
+    write_model_mot(folder / "motion.mot", body.model, times, result.q)
+    write_model_bvh(folder / "motion.bvh", body, result.q, 1.0 / frame_rate)
+    report = {
+        "frames": int(len(times)),
+        "method": job.settings.method,
+        "image": bool(job.settings.use_image),
+        "iterations_per_frame": job.settings.iterations,
+        "solve_frames_per_second": result.frames_per_second,
+        "cameras": [camera.name for camera in cameras] if job.settings.use_image else [],
+        "end_effector_residual_m": {
+            "mean": float(np.nanmean(result.target_residuals)),
+            "max": float(np.nanmax(result.target_residuals)),
+            "per_frame": [float(r) for r in result.target_residuals],
+        },
+        "overlap_per_view": {
+            camera.name: [None if np.isnan(v) else float(v) for v in result.overlap[:, index]]
+            for index, camera in enumerate(cameras) if job.settings.use_image
+        },
+        "joint_limit_hits": {str(frame): hits for frame, hits in enumerate(result.limit_hits) if hits},
+        "frames_with_dropped_targets": {str(f): d for f, d in enumerate(result.dropped_targets) if d},
+        "frames_with_disabled_views": {str(f): d for f, d in enumerate(result.disabled_views) if d},
+    }
+    (folder / "report.json").write_text(json.dumps(report, indent=2))
+    if job.overlay:
+        write_overlays(folder, job, body, cameras, silhouettes, result, times, frame_rate)
+    return report
+
+
+def write_overlays(folder: Path, job: TrackJob, body: BodyModel, cameras: list,
+                   silhouettes: Silhouettes | None, result: TrackingResult, times: np.ndarray,
+                   frame_rate: float) -> None:
+    """Per camera an MP4 of the projected skeleton, a residual plot and an HTML 3D replay."""
+    plot_series(folder / "residuals.png", times,
+                {"mean end-effector residual": result.target_residuals * 1000.0},
+                ylabel="residual [mm]", title="end-effector residual per frame")
+    segment_indices = [(result.keypoint_names.index(a), result.keypoint_names.index(b))
+                       for a, b in body.segments]
+    write_html_replay(folder / "replay.html", result.keypoint_names, segment_indices,
+                      result.keypoints, frame_rate, title=f"ibik_pin: {job.targets.name}")
+    starts = result.keypoints[:, [a for a, _ in segment_indices]]
+    ends = result.keypoints[:, [b for _, b in segment_indices]]
+    for index, camera in enumerate(cameras):
+        skeletons = ((camera.project(starts[f]), camera.project(ends[f])) for f in range(len(times)))
+        if job.videos is not None:
+            reader = VideoReader(_camera_folder_entries(job.videos, [camera.name], "videos")[camera.name])
+            frames = iter(reader)
+        else:
+            reader = None
+            width, height = camera.size
+            frames = (np.zeros((height, width, 3), np.uint8) for _ in range(len(times)))
+        masks = (silhouettes.mask(f, index) for f in range(len(times))) if silhouettes else None
+        try:
+            write_overlay_video(folder / f"overlay_{camera.name}.mp4", frames, skeletons,
+                                frame_rate, masks=masks)
+        finally:
+            if reader is not None:
+                reader.close()

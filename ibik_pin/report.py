@@ -1,0 +1,824 @@
+"""What a user looks at after tracking: plots (PNG), overlay videos (MP4), a 3D replay (HTML).
+
+Every file is written to a temporary name beside the destination and then renamed, so a failure
+never leaves half a file. The HTML replay is one self-contained file (inline CSS, JavaScript and
+data, no network), which any web browser opens offline.
+"""
+
+from __future__ import annotations
+
+import html
+import itertools
+import json
+import os
+import re
+import uuid
+from collections.abc import Callable, Iterable
+from pathlib import Path
+from typing import TypeVar
+
+import cv2
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from .exceptions import FileFormatError, InputError
+from .io.motion import write_text_atomically
+from .render import draw_skeleton, overlay_mask
+
+__all__ = ["plot_series", "write_html_replay", "write_overlay_video"]
+
+# Positions in the HTML replay are integers of this many metres: 0.1 mm.
+_HTML_UNIT = 1e-4
+_HTML_COLORS = ("#1f6fb4", "#e0592a")  # blue, orange: told apart also by most colour-blind eyes
+# Internal coordinates of the replay are Y up: (x, y, z) of a Z-up input become (x, z, -y).
+_UP_AXIS_TO_Y_UP = {
+    "y": np.eye(3),
+    "z": np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]),
+}
+# Mask pixels drawn as the background when there is no image: grey level (0-255).
+_MASK_GREY = 150
+_MISSING = object()
+_Result = TypeVar("_Result")
+
+
+def plot_series(
+    path: str | os.PathLike[str],
+    times: np.ndarray,
+    series: dict[str, np.ndarray],
+    ylabel: str,
+    title: str,
+    xlabel: str = "time [s]",
+) -> None:
+    """A PNG line plot of one or more series over time, with legend, grid and axis labels.
+
+    The figure is drawn with matplotlib's Agg canvas directly: no global backend is selected,
+    so the caller's matplotlib state is left alone. NaN values leave gaps in the lines.
+
+    Args:
+        path: The .png file to write.
+        times: Time of each sample, shape (F,) [s].
+        series: Legend label -> values, each of shape (F,), in the unit of ``ylabel``.
+        ylabel: The vertical axis label, unit included (e.g. ``"residual [mm]"``).
+        title: The title above the plot.
+        xlabel: The horizontal axis label, unit included.
+
+    Raises:
+        InputError: No series, or a series whose shape is not (F,), or the file cannot be
+            written.
+    """
+    times = np.asarray(times, dtype=float)
+    if times.ndim != 1:
+        raise InputError(f"times: expected shape (F,) [s], got {times.shape}")
+    if not series:
+        raise InputError("series: expected at least one series, got none")
+    checked = {}
+    for label, values in series.items():
+        values = np.asarray(values, dtype=float)
+        if values.shape != times.shape:
+            raise InputError(
+                f"series[{label!r}]: expected shape {times.shape} like times, got {values.shape}"
+            )
+        checked[label] = values
+
+    figure = Figure(figsize=(8.0, 4.5), dpi=100)
+    FigureCanvasAgg(figure)
+    axes = figure.add_subplot()
+    for label, values in checked.items():
+        axes.plot(times, values, label=label, linewidth=1.5)
+    axes.set_xlabel(xlabel)
+    axes.set_ylabel(ylabel)
+    axes.set_title(title)
+    axes.grid(True, alpha=0.4)
+    axes.legend(loc="best")
+    figure.tight_layout()
+    _write_atomically(path, lambda temporary: figure.savefig(temporary, format="png"))
+
+
+def write_overlay_video(
+    path: str | os.PathLike[str],
+    frames_bgr: Iterable[np.ndarray] | None,
+    skeletons: Iterable[tuple[np.ndarray, np.ndarray]],
+    fps: float,
+    masks: Iterable[np.ndarray] | None = None,
+    skeleton_color: tuple[int, int, int] = (0, 255, 0),
+    mask_color: tuple[int, int, int] = (0, 0, 255),
+) -> int:
+    """An MP4 video (``mp4v``) of the projected skeleton over the images and silhouettes.
+
+    Each video frame is the image, with the silhouette mask blended over it in ``mask_color``
+    if masks are given, and the skeleton drawn with :func:`~ibik_pin.render.draw_skeleton`.
+    Without images (``frames_bgr=None``) the mask itself is the background, drawn grey on black.
+    The inputs are consumed one frame at a time (generators are fine: a long video is never
+    held in memory) and must yield as many items each.
+
+    Args:
+        path: The .mp4 file to write.
+        frames_bgr: Images, each (H, W, 3) BGR or (H, W) grey, uint8, all of one size; or None.
+        skeletons: Per frame, the segments' start and end pixels, shapes (S, 2) and (S, 2) [px];
+            segments with a non-finite end are not drawn.
+        fps: Frames per second of the video [Hz].
+        masks: Per frame, the (H, W) silhouette (bool, or non-zero = inside); or None.
+        skeleton_color: BGR colour of the skeleton.
+        mask_color: BGR colour blended over the silhouette (opacity 0.4).
+
+    Returns:
+        The number of frames written.
+
+    Raises:
+        InputError: Neither images nor masks, no frame, a frame of another size or kind, the
+            inputs of different lengths, or ``fps`` not positive.
+        FileFormatError: OpenCV cannot open a video writer for ``path``.
+    """
+    if not np.isfinite(fps) or fps <= 0.0:
+        raise InputError(f"fps: expected a positive number [Hz], got {fps}")
+    if frames_bgr is None and masks is None:
+        raise InputError("frames_bgr, masks: expected images, masks or both, got neither")
+    sources = {"skeletons": skeletons, "frames_bgr": frames_bgr, "masks": masks}
+    sources = {name: iter(source) for name, source in sources.items() if source is not None}
+
+    def write(temporary: Path) -> int:
+        writer = None
+        try:
+            items_per_frame = itertools.zip_longest(*sources.values(), fillvalue=_MISSING)
+            for index, items in enumerate(items_per_frame):
+                item = dict(zip(sources, items))
+                ended = [name for name, value in item.items() if value is _MISSING]
+                if ended:
+                    longer = [name for name in item if name not in ended]
+                    raise InputError(
+                        f"{', '.join(ended)}: ended after {index} frames, but "
+                        f"{', '.join(longer)} went on: expected as many frames in each"
+                    )
+                image = _overlay_frame(index, item, skeleton_color, mask_color)
+                if writer is None:
+                    size = (image.shape[1], image.shape[0])
+                    writer = _open_video_writer(temporary, path, fps, size)
+                elif (image.shape[1], image.shape[0]) != size:
+                    raise InputError(
+                        f"frame {index}: expected {size[0]} x {size[1]} px like frame 0, got "
+                        f"{image.shape[1]} x {image.shape[0]} px"
+                    )
+                writer.write(image)
+            if writer is None:
+                raise InputError(
+                    f"{', '.join(sources)}: expected at least one frame, got none"
+                )
+            return index + 1
+        finally:
+            if writer is not None:
+                writer.release()
+
+    return _write_atomically(path, write)
+
+
+def write_html_replay(
+    path: str | os.PathLike[str],
+    keypoint_names: list[str],
+    segments: list[tuple[int, int]],
+    positions: np.ndarray,
+    frame_rate: float,
+    title: str,
+    up_axis: str = "y",
+    compare_positions: np.ndarray | None = None,
+    label: str = "tracked",
+    compare_label: str = "reference",
+) -> None:
+    """One self-contained HTML file that replays the 3D skeleton in a web browser, offline.
+
+    The page draws the skeleton on a ``<canvas>`` with a perspective camera written in plain
+    JavaScript (no library, no network): drag to orbit, shift-drag or right-drag to pan, wheel to
+    zoom, double-click to reset; play/pause (space), frame slider (arrow keys step), frame
+    counter and time, playback speed, a ground grid at the lowest point of the motion with the
+    shadow of the skeleton, an axis gizmo, keypoint names on hover (or all of them), and a
+    "follow" mode that keeps a travelling subject centred. An optional second skeleton (ground
+    truth, or the baseline without images) is drawn dashed in another colour, with a legend.
+
+    Positions are embedded as JSON integers of 0.1 mm (rounded), which keeps a file of 1000
+    frames of 24 keypoints near 0.4 MB; a missing (NaN) keypoint is not drawn.
+
+    Args:
+        path: The .html file to write (atomically).
+        keypoint_names: The K keypoint names.
+        segments: Pairs of keypoint indices, each drawn as a line.
+        positions: World keypoint positions, shape (F, K, 3) [m]; NaN for a missing keypoint.
+        frame_rate: Frames per second [Hz].
+        title: The page title.
+        up_axis: The vertical axis of ``positions``: ``"y"`` (the human model, OpenSim, BVH)
+            or ``"z"``.
+        compare_positions: A second skeleton over the same frames, shape (F, K, 3) [m], or None.
+        label: The legend label of ``positions``.
+        compare_label: The legend label of ``compare_positions``.
+
+    Raises:
+        InputError: A shape, index or value is not as described (the message names it), no
+            position is finite, or the file cannot be written.
+    """
+    names = [str(name) for name in keypoint_names]
+    keypoint_count = len(names)
+    skeletons = [("positions", positions, label)]
+    if compare_positions is not None:
+        skeletons.append(("compare_positions", compare_positions, compare_label))
+    arrays = []
+    for argument, array, _ in skeletons:
+        array = np.asarray(array, dtype=float)
+        if array.ndim != 3 or array.shape[1:] != (keypoint_count, 3) or array.shape[0] == 0:
+            raise InputError(
+                f"{argument}: expected shape (F, {keypoint_count}, 3) [m] with F >= 1 for "
+                f"{keypoint_count} keypoint names, got {array.shape}"
+            )
+        arrays.append(array)
+    if len(arrays) == 2 and arrays[1].shape != arrays[0].shape:
+        raise InputError(
+            f"compare_positions: expected the shape of positions {arrays[0].shape}, "
+            f"got {arrays[1].shape}"
+        )
+    try:
+        segment_array = np.asarray(segments, dtype=int).reshape(-1, 2)
+    except (TypeError, ValueError):
+        segment_array = np.empty((0, 2), int)  # ragged, or not numbers: refused below
+    if segment_array.shape != (len(segments), 2) or np.any(
+        (segment_array < 0) | (segment_array >= keypoint_count)
+    ):
+        raise InputError(
+            f"segments: expected pairs of keypoint indices in [0, {keypoint_count - 1}], "
+            f"got {list(segments)}"
+        )
+    if not np.isfinite(frame_rate) or frame_rate <= 0.0:
+        raise InputError(f"frame_rate: expected a positive number [Hz], got {frame_rate}")
+    if up_axis not in _UP_AXIS_TO_Y_UP:
+        raise InputError(f"up_axis: expected 'y' or 'z', got {up_axis!r}")
+
+    to_y_up = _UP_AXIS_TO_Y_UP[up_axis]
+    # Rounded first, so the framing below is that of the numbers the page draws.
+    points = [np.rint(array @ to_y_up.T / _HTML_UNIT) for array in arrays]
+    finite = [np.isfinite(array).all(axis=-1) for array in points]
+    all_points = np.concatenate(points, axis=1) * _HTML_UNIT
+    all_finite = np.concatenate(finite, axis=1)
+    if not np.any(all_finite):
+        raise InputError("positions: expected at least one finite keypoint position, got none")
+    lowest = np.where(all_finite[..., np.newaxis], all_points, np.inf).min(axis=1)
+    highest = np.where(all_finite[..., np.newaxis], all_points, -np.inf).max(axis=1)
+    seen = np.isfinite(lowest).all(axis=1)
+    lowest, highest = lowest[seen], highest[seen]
+    body_size = float(np.linalg.norm(highest - lowest, axis=1).max())
+    bounds_min, bounds_max = lowest.min(axis=0), highest.max(axis=0)
+    horizontal_extent = float(np.linalg.norm((bounds_max - bounds_min)[[0, 2]]))
+
+    metadata = {
+        "names": names,
+        "segments": segment_array.tolist(),
+        "frameCount": int(arrays[0].shape[0]),
+        "frameRate": float(frame_rate),
+        "unit": _HTML_UNIT,
+        "bounds": {
+            "min": bounds_min.tolist(),
+            "max": bounds_max.tolist(),
+            "bodySize": max(body_size, 0.5),
+            "extent": float(np.linalg.norm(bounds_max - bounds_min)),
+        },
+        "follow": horizontal_extent > 2.0 * max(body_size, 0.5),
+        # The input's X, Y, Z axes in the replay's Y-up coordinates, for the axis gizmo.
+        "axes": to_y_up.T.tolist(),
+        # Initial view: the human's ISB front (+X) three-quarter view, from slightly above.
+        "view": {"yaw": float(np.pi / 2 - 0.6), "pitch": 0.25},
+        "skeletons": [
+            {"label": str(skeleton_label), "color": color, "positions": f"@POSITIONS{index}@"}
+            for index, ((_, _, skeleton_label), color) in enumerate(zip(skeletons, _HTML_COLORS))
+        ],
+    }
+    # "<" escaped so that no name can close the <script> element holding the data.
+    data_json = json.dumps(metadata, separators=(",", ":")).replace("<", "\\u003c")
+    for index, (array, array_finite) in enumerate(zip(points, finite)):
+        data_json = data_json.replace(f'"@POSITIONS{index}@"', _json_integers(array, array_finite))
+    # One pass, so that neither the title nor the data can bring in a placeholder.
+    values = {"TITLE": html.escape(title), "DATA": data_json}
+    page = re.sub(r"@(TITLE|DATA)@", lambda match: values[match.group(1)], _HTML_TEMPLATE)
+    write_text_atomically(path, page)
+
+
+def _json_integers(points: np.ndarray, finite: np.ndarray) -> str:
+    """A JSON array of the (F, K, 3) integer points, flat, a missing point as 3 nulls."""
+    tokens = np.where(finite[..., np.newaxis], points, 0.0).astype(np.int64).astype(str)
+    tokens[~finite] = "null"
+    return "[" + ",".join(tokens.ravel().tolist()) + "]"
+
+
+def _overlay_frame(
+    index: int,
+    item: dict[str, object],
+    skeleton_color: tuple[int, int, int],
+    mask_color: tuple[int, int, int],
+) -> np.ndarray:
+    """Frame `index` of an overlay video: image or grey mask, coloured mask, skeleton."""
+    mask = None
+    if "masks" in item:
+        mask = np.asarray(item["masks"])
+        if mask.ndim != 2:
+            raise InputError(
+                f"masks: expected (H, W) silhouettes, got shape {mask.shape} at frame {index}"
+            )
+        mask = mask != 0
+    if "frames_bgr" in item:
+        image = np.asarray(item["frames_bgr"])
+        is_bgr = image.ndim == 3 and image.shape[2] == 3
+        if image.dtype != np.uint8 or not (image.ndim == 2 or is_bgr):
+            raise InputError(
+                f"frames_bgr: expected (H, W, 3) BGR or (H, W) grey uint8 images, got shape "
+                f"{image.shape} and dtype {image.dtype} at frame {index}"
+            )
+        image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR) if image.ndim == 2 else image
+        if mask is not None:
+            if mask.shape != image.shape[:2]:
+                raise InputError(
+                    f"masks: expected shape {image.shape[:2]} like the image, got {mask.shape} "
+                    f"at frame {index}"
+                )
+            image = overlay_mask(image, mask, color=mask_color, alpha=0.4)
+    else:
+        image = np.zeros((*mask.shape, 3), np.uint8)
+        image[mask] = _MASK_GREY
+    skeleton = item["skeletons"]
+    if not isinstance(skeleton, (tuple, list)) or len(skeleton) != 2:
+        raise InputError(
+            f"skeletons: expected a pair (starts (S, 2), ends (S, 2)) [px] at frame {index}, "
+            f"got {type(skeleton).__name__}"
+        )
+    return draw_skeleton(image, skeleton[0], skeleton[1], color=skeleton_color)
+
+
+def _open_video_writer(
+    temporary: Path, path: str | os.PathLike[str], fps: float, size: tuple[int, int]
+) -> cv2.VideoWriter:
+    try:
+        writer = cv2.VideoWriter(str(temporary), cv2.VideoWriter_fourcc(*"mp4v"), float(fps), size)
+    except cv2.error as error:
+        raise FileFormatError(f"{path}: OpenCV cannot write an mp4v video: {error}") from None
+    if not writer.isOpened():
+        writer.release()
+        raise FileFormatError(
+            f"{path}: OpenCV cannot open an mp4v video writer ({size[0]} x {size[1]} px at "
+            f"{fps} fps); check the folder exists and is writable"
+        )
+    return writer
+
+
+def _write_atomically(
+    path: str | os.PathLike[str], write: Callable[[Path], _Result]
+) -> _Result:
+    """Call ``write(temporary)`` then rename the temporary file to `path`; clean up on failure.
+
+    The temporary file is in the destination folder and keeps its suffix (OpenCV picks the
+    container from it).
+    """
+    path = Path(path)
+    temporary = path.with_name(f".{path.stem}.{uuid.uuid4().hex}.tmp{path.suffix}")
+    try:
+        result = write(temporary)
+        os.replace(temporary, path)
+    except BaseException as error:
+        temporary.unlink(missing_ok=True)
+        if isinstance(error, OSError):
+            raise InputError(f"{path}: cannot write: {error}") from error
+        raise
+    return result
+
+
+_HTML_TEMPLATE = r"""<!DOCTYPE html>
+<html lang="en">
+<head>
+<meta charset="utf-8">
+<meta name="viewport" content="width=device-width, initial-scale=1">
+<title>@TITLE@</title>
+<style>
+html, body { margin: 0; height: 100%; }
+body {
+  display: flex; flex-direction: column; background: #fafaf7; color: #222;
+  font: 14px/1.4 system-ui, -apple-system, "Segoe UI", Roboto, Helvetica, Arial, sans-serif;
+}
+header { display: flex; align-items: baseline; gap: 16px; flex-wrap: wrap;
+  padding: 8px 14px; border-bottom: 1px solid #ddd; }
+header h1 { margin: 0; font-size: 16px; font-weight: 600; }
+header .info { color: #666; font-size: 13px; }
+#view { position: relative; flex: 1; min-height: 240px; overflow: hidden; }
+#canvas { position: absolute; left: 0; top: 0; width: 100%; height: 100%;
+  cursor: grab; touch-action: none; }
+#canvas.dragging { cursor: grabbing; }
+#legend { position: absolute; top: 10px; left: 12px; padding: 6px 10px; font-size: 13px;
+  background: rgba(255, 255, 255, 0.85); border: 1px solid #ddd; border-radius: 4px;
+  pointer-events: none; }
+#legend .swatch { display: inline-block; width: 22px; margin-right: 8px;
+  vertical-align: middle; border-top: 3px solid; }
+#help { position: absolute; right: 12px; bottom: 8px; color: #777; font-size: 12px;
+  pointer-events: none; text-align: right; }
+#controls { display: flex; align-items: center; gap: 12px; flex-wrap: wrap;
+  padding: 8px 14px; border-top: 1px solid #ddd; }
+#controls button { font: inherit; min-width: 84px; padding: 3px 10px; }
+#controls label { white-space: nowrap; }
+#slider { flex: 1; min-width: 160px; }
+#counter { min-width: 200px; font-variant-numeric: tabular-nums; }
+</style>
+</head>
+<body>
+<header><h1>@TITLE@</h1><span class="info" id="info"></span></header>
+<div id="view">
+  <canvas id="canvas"></canvas>
+  <div id="legend"></div>
+  <div id="help">drag: orbit &middot; shift+drag or right-drag: pan &middot; wheel: zoom &middot;
+    double-click: reset view<br>space: play / pause &middot;
+    &larr; &rarr;: previous / next frame</div>
+</div>
+<div id="controls">
+  <button id="play" type="button">Play</button>
+  <input id="slider" type="range" min="0" max="0" step="1" value="0" aria-label="frame">
+  <span id="counter"></span>
+  <label>speed <select id="speed">
+    <option value="0.25">0.25&times;</option><option value="0.5">0.5&times;</option>
+    <option value="1" selected>1&times;</option><option value="2">2&times;</option>
+  </select></label>
+  <label title="keep the subject centred"><input id="follow" type="checkbox"> follow</label>
+  <label><input id="names" type="checkbox"> names</label>
+  <button id="reset" type="button">Reset view</button>
+</div>
+<script id="replay-data" type="application/json">@DATA@</script>
+<script>
+(function () {
+  "use strict";
+  var data = JSON.parse(document.getElementById("replay-data").textContent);
+  var names = data.names, segments = data.segments, skeletons = data.skeletons;
+  var K = names.length, F = data.frameCount, UNIT = data.unit, bounds = data.bounds;
+  var FOV = 40 * Math.PI / 180, NEAR = 0.05, GRID_STEP = 0.5;
+  var AXIS_COLORS = ["#d0342c", "#2e9e44", "#2c6fd0"], AXIS_NAMES = ["X", "Y", "Z"];
+  var centre = [0, 1, 2].map(function (i) { return 0.5 * (bounds.min[i] + bounds.max[i]); });
+
+  var canvas = document.getElementById("canvas"), context = canvas.getContext("2d");
+  var slider = document.getElementById("slider"), playButton = document.getElementById("play");
+  var counter = document.getElementById("counter"), speedSelect = document.getElementById("speed");
+  var followBox = document.getElementById("follow"), namesBox = document.getElementById("names");
+
+  var view = { yaw: 0, pitch: 0, distance: 1, pan: [0, 0, 0] };
+  var camera = null, width = 1, height = 1, focal = 1;
+  var frame = 0, time = 0, speed = 1, playing = false, lastStamp = null, dirty = true;
+  var drag = null, hovered = null, screenPoints = [];
+
+  function point(skeleton, f, k) {
+    var values = skeletons[skeleton].positions, i = (f * K + k) * 3;
+    if (values[i] === null) { return null; }
+    return [values[i] * UNIT, values[i + 1] * UNIT, values[i + 2] * UNIT];
+  }
+
+  function target() {
+    var base = centre.slice();
+    if (followBox.checked) {
+      var sum = [0, 0, 0], count = 0;
+      for (var k = 0; k < K; k++) {
+        var p = point(0, frame, k);
+        if (p) { sum[0] += p[0]; sum[2] += p[2]; count++; }
+      }
+      if (count) { base[0] = sum[0] / count; base[2] = sum[2] / count; }
+    }
+    return [base[0] + view.pan[0], base[1] + view.pan[1], base[2] + view.pan[2]];
+  }
+
+  function setupCamera() {
+    camera = { target: target(), cy: Math.cos(view.yaw), sy: Math.sin(view.yaw),
+               cp: Math.cos(view.pitch), sp: Math.sin(view.pitch) };
+  }
+
+  // World (Y up) to camera coordinates: x right, y up, depth along the view direction.
+  function toCamera(p) {
+    var x = p[0] - camera.target[0], y = p[1] - camera.target[1], z = p[2] - camera.target[2];
+    var x1 = camera.cy * x - camera.sy * z, z1 = camera.sy * x + camera.cy * z;
+    var y2 = camera.cp * y - camera.sp * z1, z2 = camera.sp * y + camera.cp * z1;
+    return [x1, y2, view.distance - z2];
+  }
+
+  function toScreen(c) {
+    return [0.5 * width + focal * c[0] / c[2], 0.5 * height - focal * c[1] / c[2]];
+  }
+
+  // A segment in camera coordinates cut at the near plane, as two screen points, or null.
+  function clip(a, b) {
+    if (a[2] < NEAR && b[2] < NEAR) { return null; }
+    if (a[2] < NEAR) { a = toNear(b, a); } else if (b[2] < NEAR) { b = toNear(a, b); }
+    return [toScreen(a), toScreen(b)];
+  }
+
+  function toNear(inside, outside) {
+    var s = (inside[2] - NEAR) / (inside[2] - outside[2]);
+    return [inside[0] + s * (outside[0] - inside[0]),
+            inside[1] + s * (outside[1] - inside[1]), NEAR];
+  }
+
+  // Grid cells around the target, fading with the distance from it (drawn in a few paths of
+  // one opacity each); the lines x = 0 and z = 0 in the colours of the Z and X axes.
+  function drawGrid() {
+    var floor = bounds.min[1], t = camera.target, LEVELS = 8;
+    var step = view.distance > 12 ? 2 * GRID_STEP : GRID_STEP;
+    var count = Math.min(30, Math.max(6, Math.ceil(view.distance / step)));
+    var radius = count * step;
+    var x0 = Math.round(t[0] / step) * step, z0 = Math.round(t[2] / step) * step;
+    var paths = [], axes = [[], []];
+    for (var level = 0; level < LEVELS; level++) { paths.push([]); }
+    for (var i = -count; i <= count; i++) {
+      for (var j = -count; j < count; j++) {
+        var u = i * step, v = (j + 0.5) * step;
+        var fade = 1 - Math.sqrt(u * u + v * v) / radius;
+        if (fade <= 0) { continue; }
+        var x = x0 + u, z = z0 + u, from = j * step, to = (j + 1) * step;
+        var along = [[x, floor, z0 + from], [x, floor, z0 + to]];
+        var across = [[x0 + from, floor, z], [x0 + to, floor, z]];
+        var bucket = paths[Math.min(LEVELS - 1, Math.floor(fade * LEVELS))];
+        (Math.abs(x) < 1e-9 ? axes[0] : bucket).push(along);
+        (Math.abs(z) < 1e-9 ? axes[1] : bucket).push(across);
+      }
+    }
+    context.lineWidth = 1;
+    paths.forEach(function (lines, level) {
+      context.strokeStyle = "rgba(150, 150, 140, " + (0.5 * (level + 1) / LEVELS) + ")";
+      strokePath(lines);
+    });
+    context.strokeStyle = "rgba(44, 111, 208, 0.5)";
+    strokePath(axes[0]);
+    context.strokeStyle = "rgba(208, 52, 44, 0.5)";
+    strokePath(axes[1]);
+  }
+
+  function strokePath(lines) {
+    context.beginPath();
+    lines.forEach(function (line) {
+      var ends = clip(toCamera(line[0]), toCamera(line[1]));
+      if (ends) {
+        context.moveTo(ends[0][0], ends[0][1]);
+        context.lineTo(ends[1][0], ends[1][1]);
+      }
+    });
+    context.stroke();
+  }
+
+  function drawShadows() {
+    var floor = bounds.min[1];
+    context.strokeStyle = "rgba(0, 0, 0, 0.10)";
+    context.lineWidth = 5;
+    context.lineCap = "round";
+    var lines = [];
+    for (var s = 0; s < skeletons.length; s++) {
+      for (var i = 0; i < segments.length; i++) {
+        var a = point(s, frame, segments[i][0]), b = point(s, frame, segments[i][1]);
+        if (a && b) { lines.push([[a[0], floor, a[2]], [b[0], floor, b[2]]]); }
+      }
+    }
+    strokePath(lines);
+  }
+
+  function drawSkeletons() {
+    var items = [];
+    screenPoints = [];
+    for (var s = 0; s < skeletons.length; s++) {
+      var cameraPoints = [];
+      for (var k = 0; k < K; k++) {
+        var p = point(s, frame, k);
+        cameraPoints.push(p ? toCamera(p) : null);
+      }
+      for (var i = 0; i < segments.length; i++) {
+        var a = cameraPoints[segments[i][0]], b = cameraPoints[segments[i][1]];
+        if (a && b) { items.push({ skeleton: s, a: a, b: b, depth: 0.5 * (a[2] + b[2]) }); }
+      }
+      for (k = 0; k < K; k++) {
+        var c = cameraPoints[k];
+        if (c && c[2] > NEAR) {
+          var q = toScreen(c);
+          items.push({ skeleton: s, joint: k, point: q, depth: c[2] });
+          screenPoints.push({ skeleton: s, joint: k, x: q[0], y: q[1] });
+        }
+      }
+    }
+    items.sort(function (u, v) { return v.depth - u.depth; });  // far first
+    context.lineCap = "round";
+    for (var j = 0; j < items.length; j++) {
+      var item = items[j], color = skeletons[item.skeleton].color;
+      context.setLineDash(item.skeleton === 0 ? [] : [7, 5]);
+      if (item.point) {
+        context.fillStyle = color;
+        context.beginPath();
+        context.arc(item.point[0], item.point[1], item.skeleton === 0 ? 3.5 : 3, 0, 2 * Math.PI);
+        context.fill();
+      } else {
+        var ends = clip(item.a, item.b);
+        if (!ends) { continue; }
+        context.strokeStyle = color;
+        context.lineWidth = item.skeleton === 0 ? 3 : 2.5;
+        context.beginPath();
+        context.moveTo(ends[0][0], ends[0][1]);
+        context.lineTo(ends[1][0], ends[1][1]);
+        context.stroke();
+      }
+    }
+    context.setLineDash([]);
+  }
+
+  function drawLabel(text, x, y, bold) {
+    context.font = (bold ? "600 13px " : "11px ") + "system-ui, sans-serif";
+    var w = context.measureText(text).width;
+    context.fillStyle = bold ? "rgba(255, 255, 255, 0.92)" : "rgba(255, 255, 255, 0.7)";
+    context.fillRect(x + 6, y - 16, w + 8, 18);
+    context.fillStyle = bold ? "#111" : "#555";
+    context.fillText(text, x + 10, y - 3);
+  }
+
+  function drawLabels() {
+    if (namesBox.checked) {
+      screenPoints.forEach(function (p) {
+        if (p.skeleton === 0) { drawLabel(names[p.joint], p.x, p.y, false); }
+      });
+    }
+    if (hovered) {
+      var p = screenPoints.filter(function (q) {
+        return q.skeleton === hovered.skeleton && q.joint === hovered.joint;
+      })[0];
+      if (p) {
+        var suffix = skeletons.length > 1 ? " (" + skeletons[p.skeleton].label + ")" : "";
+        drawLabel(names[p.joint] + suffix, p.x, p.y, true);
+      }
+    }
+  }
+
+  function drawAxes() {
+    var origin = [44, height - 44], length = 28;
+    context.lineWidth = 2;
+    context.font = "600 12px system-ui, sans-serif";
+    for (var i = 0; i < 3; i++) {
+      var v = data.axes[i];
+      var x1 = camera.cy * v[0] - camera.sy * v[2], z1 = camera.sy * v[0] + camera.cy * v[2];
+      var y2 = camera.cp * v[1] - camera.sp * z1;
+      var end = [origin[0] + length * x1, origin[1] - length * y2];
+      context.strokeStyle = AXIS_COLORS[i];
+      context.fillStyle = AXIS_COLORS[i];
+      context.beginPath();
+      context.moveTo(origin[0], origin[1]);
+      context.lineTo(end[0], end[1]);
+      context.stroke();
+      context.fillText(AXIS_NAMES[i], end[0] + 4 * x1 - 4, end[1] - 4 * y2 + 4);
+    }
+  }
+
+  function draw() {
+    setupCamera();
+    context.clearRect(0, 0, width, height);
+    drawGrid();
+    drawShadows();
+    drawSkeletons();
+    drawLabels();
+    drawAxes();
+  }
+
+  function resize() {
+    var box = canvas.parentElement.getBoundingClientRect(), ratio = window.devicePixelRatio || 1;
+    width = Math.max(1, box.width);
+    height = Math.max(1, box.height);
+    canvas.width = Math.round(width * ratio);
+    canvas.height = Math.round(height * ratio);
+    context.setTransform(ratio, 0, 0, ratio, 0, 0);
+    focal = 0.5 * height / Math.tan(0.5 * FOV);
+    dirty = true;
+  }
+
+  function resetView() {
+    view.yaw = data.view.yaw;
+    view.pitch = data.view.pitch;
+    var size = followBox.checked ? bounds.bodySize : Math.max(bounds.bodySize, bounds.extent);
+    view.distance = 0.55 * size / Math.tan(0.5 * FOV) + 0.3 * size;
+    view.pan = [0, 0, 0];
+    dirty = true;
+  }
+
+  function updateCounter() {
+    counter.textContent = "frame " + (frame + 1) + " / " + F + " \u00b7 " +
+      (frame / data.frameRate).toFixed(3) + " s";
+    slider.value = String(frame);
+  }
+
+  function setFrame(f) {
+    frame = ((f % F) + F) % F;
+    time = frame / data.frameRate;
+    updateCounter();
+    dirty = true;
+  }
+
+  function setPlaying(on) {
+    playing = on && F > 1;
+    lastStamp = null;
+    playButton.textContent = playing ? "\u275a\u275a Pause" : "\u25b6 Play";
+  }
+
+  function tick(stamp) {
+    if (playing) {
+      if (lastStamp !== null) {
+        var duration = F / data.frameRate;
+        time = (time + speed * (stamp - lastStamp) / 1000) % duration;
+        var f = Math.min(F - 1, Math.floor(time * data.frameRate + 1e-9));
+        if (f !== frame) { frame = f; updateCounter(); dirty = true; }
+      }
+      lastStamp = stamp;
+    }
+    if (dirty) { dirty = false; draw(); }
+    window.requestAnimationFrame(tick);
+  }
+
+  canvas.addEventListener("pointerdown", function (event) {
+    drag = { x: event.clientX, y: event.clientY, pan: event.shiftKey || event.button === 2 };
+    canvas.setPointerCapture(event.pointerId);
+    canvas.classList.add("dragging");
+  });
+  canvas.addEventListener("pointermove", function (event) {
+    if (drag) {
+      var dx = event.clientX - drag.x, dy = event.clientY - drag.y;
+      drag.x = event.clientX;
+      drag.y = event.clientY;
+      if (drag.pan) {
+        var scale = view.distance / focal;
+        var right = [camera.cy, 0, -camera.sy];
+        var up = [-camera.sp * camera.sy, camera.cp, -camera.sp * camera.cy];
+        for (var i = 0; i < 3; i++) { view.pan[i] += scale * (up[i] * dy - right[i] * dx); }
+      } else {
+        view.yaw -= 0.008 * dx;
+        view.pitch = Math.max(-1.45, Math.min(1.45, view.pitch + 0.008 * dy));
+      }
+      dirty = true;
+      return;
+    }
+    var box = canvas.getBoundingClientRect();
+    var x = event.clientX - box.left, y = event.clientY - box.top, best = null, bestDistance = 100;
+    screenPoints.forEach(function (p) {
+      var d = (p.x - x) * (p.x - x) + (p.y - y) * (p.y - y);
+      if (d < bestDistance) { bestDistance = d; best = p; }
+    });
+    var changed = (best === null) !== (hovered === null) || (best && hovered &&
+      (best.skeleton !== hovered.skeleton || best.joint !== hovered.joint));
+    if (changed) { hovered = best; dirty = true; }
+  });
+  function endDrag() { drag = null; canvas.classList.remove("dragging"); }
+  canvas.addEventListener("pointerup", endDrag);
+  canvas.addEventListener("pointercancel", endDrag);
+  canvas.addEventListener("pointerleave", function () {
+    if (hovered) { hovered = null; dirty = true; }
+  });
+  canvas.addEventListener("contextmenu", function (event) { event.preventDefault(); });
+  canvas.addEventListener("wheel", function (event) {
+    event.preventDefault();
+    var step = event.deltaMode === 1 ? 33 * event.deltaY : event.deltaY;
+    view.distance = Math.max(0.1, Math.min(1000, view.distance * Math.exp(0.001 * step)));
+    dirty = true;
+  }, { passive: false });
+  canvas.addEventListener("dblclick", resetView);
+
+  playButton.addEventListener("click", function () { setPlaying(!playing); });
+  document.getElementById("reset").addEventListener("click", resetView);
+  slider.addEventListener("input", function () {
+    setPlaying(false);
+    setFrame(Number(slider.value));
+  });
+  speedSelect.addEventListener("change", function () { speed = Number(speedSelect.value); });
+  followBox.addEventListener("change", function () { view.pan = [0, 0, 0]; dirty = true; });
+  namesBox.addEventListener("change", function () { dirty = true; });
+  window.addEventListener("keydown", function (event) {
+    var tag = event.target && event.target.tagName;
+    if (tag === "BUTTON" || tag === "SELECT") { return; }
+    if (event.code === "Space" || event.key === " ") {
+      event.preventDefault();
+      setPlaying(!playing);
+    } else if (event.key === "ArrowRight" || event.key === "ArrowLeft") {
+      event.preventDefault();
+      setPlaying(false);
+      setFrame(frame + (event.key === "ArrowRight" ? 1 : -1));
+    }
+  });
+  window.addEventListener("resize", resize);
+
+  document.getElementById("info").textContent = K + " keypoints \u00b7 " + F + " frames at " +
+    data.frameRate + " Hz \u00b7 " + (F / data.frameRate).toFixed(2) + " s";
+  var legend = document.getElementById("legend");
+  skeletons.forEach(function (skeleton, index) {
+    var row = document.createElement("div"), swatch = document.createElement("span");
+    swatch.className = "swatch";
+    swatch.style.borderTopColor = skeleton.color;
+    swatch.style.borderTopStyle = index === 0 ? "solid" : "dashed";
+    row.appendChild(swatch);
+    row.appendChild(document.createTextNode(skeleton.label));
+    legend.appendChild(row);
+  });
+  slider.max = String(F - 1);
+  slider.disabled = F < 2;
+  playButton.disabled = F < 2;
+  followBox.checked = data.follow;
+  resize();
+  resetView();
+  setFrame(0);
+  setPlaying(true);
+  draw();
+  window.requestAnimationFrame(tick);
+})();
+</script>
+</body>
+</html>
+"""
