@@ -1,0 +1,214 @@
+"""`ibik track` end to end on a short sequence rendered by the project, and its bad-input errors."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from ibik_pin.cameras import read_calibration, write_calibration
+from ibik_pin.cli import main
+from ibik_pin.demo import ESTIMATED, prepare_demo_inputs
+from ibik_pin.evaluation import mean_joint_errors_mm
+from ibik_pin.io.mot import read_mot
+from ibik_pin.io.trc import read_trc, write_trc
+
+OUTPUTS = ["joints.trc", "q.csv", "motion.mot", "motion.bvh", "report.json"]
+OVERLAYS = ["residuals.png", "replay.html", "overlay_cam1.mp4", "overlay_cam2.mp4"]
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory):
+    """30 frames of real walking (CMU 35_01 at 15 Hz), 2 views, clean masks."""
+    return prepare_demo_inputs(tmp_path_factory.mktemp("walk") / "input", views=2, frame_step=8)
+
+
+def track_arguments(dataset, out: Path, *extra: str) -> list[str]:
+    return ["track", "--targets", str(dataset.targets), "--calibration", str(dataset.calibration),
+            "--masks", str(dataset.masks), "--static", str(dataset.folder / "static.trc"),
+            "--quiet", "--out", str(out), *extra]
+
+
+def internal_joint_error(dataset, out: Path) -> float:
+    truth = read_trc(dataset.truth)
+    estimate = read_trc(out / "joints.trc")
+    order = [estimate.marker_names.index(name) for name in truth.marker_names]
+    errors = mean_joint_errors_mm(estimate.positions[:, order], truth.positions, truth.marker_names, ESTIMATED)
+    return float(np.mean(list(errors.values())))
+
+
+@pytest.fixture(scope="module")
+def runs(dataset, tmp_path_factory):
+    folder = tmp_path_factory.mktemp("runs")
+    codes = {
+        "ibik": main(track_arguments(dataset, folder / "ibik", "--overlay")),
+        "pik": main(track_arguments(dataset, folder / "pik", "--no-image")),
+    }
+    return folder, codes
+
+
+def test_track_with_and_without_the_image_exits_0_and_writes_every_output(runs):
+    folder, codes = runs
+    assert codes == {"ibik": 0, "pik": 0}
+    for variant in ("ibik", "pik"):
+        for name in OUTPUTS:
+            assert (folder / variant / name).stat().st_size > 0, (variant, name)
+    for name in OVERLAYS:
+        assert (folder / "ibik" / name).stat().st_size > 0, name
+
+
+def test_the_image_lowers_the_elbow_and_knee_errors(dataset, runs):
+    folder, _ = runs
+    ibik = internal_joint_error(dataset, folder / "ibik")
+    pik = internal_joint_error(dataset, folder / "pik")
+    assert ibik < pik
+
+
+def test_joints_trc_has_one_row_per_input_frame_with_the_input_times(dataset, runs):
+    folder, _ = runs
+    targets = read_trc(dataset.targets)
+    joints = read_trc(folder / "ibik" / "joints.trc")
+    assert joints.positions.shape[0] == targets.positions.shape[0]
+    assert np.allclose(joints.times, targets.times)
+    for name in ["Hip", "Neck", "Head", "LShoulder", "LElbow", "LWrist", "RShoulder", "RElbow",
+                 "RWrist", "LHip", "LKnee", "LAnkle", "RHip", "RKnee", "RAnkle"]:
+        assert name in joints.marker_names
+    assert joints.units == targets.units
+
+
+def test_the_report_and_mot_are_readable(runs):
+    folder, _ = runs
+    report = json.loads((folder / "ibik" / "report.json").read_text())
+    assert report["frames"] == 30 and report["image"] is True
+    assert report["end_effector_residual_m"]["mean"] < 0.01
+    assert set(report["overlap_per_view"]) == {"cam1", "cam2"}
+    mot = read_mot(folder / "ibik" / "motion.mot")
+    assert mot.in_degrees and mot.values.shape[0] == 30
+
+
+def test_the_overlay_video_decodes_to_one_frame_per_input_frame(runs):
+    folder, _ = runs
+    capture = cv2.VideoCapture(str(folder / "ibik" / "overlay_cam1.mp4"))
+    count = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
+    ok, frame = capture.read()
+    capture.release()
+    assert ok and frame.shape == (480, 640, 3) and count == 30
+
+
+def test_a_trc_in_millimetres_gives_joints_in_millimetres(dataset, tmp_path):
+    targets = read_trc(dataset.targets)
+    targets.positions = targets.positions * 1000.0
+    targets.units = "mm"
+    path = tmp_path / "targets_mm.trc"
+    write_trc(path, targets)
+    arguments = track_arguments(dataset, tmp_path / "out", "--no-image", "--iterations", "3")
+    arguments[arguments.index("--targets") + 1] = str(path)
+    assert main(arguments) == 0
+    joints = read_trc(tmp_path / "out" / "joints.trc")
+    assert joints.units == "mm"
+    assert np.nanmax(np.abs(joints.positions)) > 100.0
+
+
+def test_an_occluded_target_is_dropped_for_that_frame_and_reported(dataset, tmp_path):
+    targets = read_trc(dataset.targets)
+    targets.positions[3, targets.marker_names.index("LWrist")] = np.nan
+    path = tmp_path / "occluded.trc"
+    write_trc(path, targets)
+    arguments = track_arguments(dataset, tmp_path / "out", "--no-image", "--iterations", "3")
+    arguments[arguments.index("--targets") + 1] = str(path)
+    assert main(arguments) == 0
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert report["frames_with_dropped_targets"] == {"3": ["LWrist"]}
+
+
+def run_bad(arguments, capsys) -> str:
+    code = main(arguments)
+    error = capsys.readouterr().err
+    assert code == 2
+    assert error.count("\n") == 1 and error.startswith("ibik: error: ")
+    assert "Traceback" not in error
+    return error
+
+
+def test_unknown_keypoint_names_say_which_are_known(dataset, tmp_path, capsys):
+    targets = read_trc(dataset.targets)
+    targets.marker_names[0] = "LeftFoot"
+    path = tmp_path / "bad.trc"
+    write_trc(path, targets)
+    arguments = track_arguments(dataset, tmp_path / "out")
+    arguments[arguments.index("--targets") + 1] = str(path)
+    error = run_bad(arguments, capsys)
+    assert "unknown keypoint name(s) LeftFoot; known keypoints: Hip, LHip" in error
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_frame_count_that_differs_from_the_masks_is_refused(dataset, tmp_path, capsys):
+    masks = tmp_path / "masks"
+    shutil.copytree(dataset.masks, masks)
+    sorted((masks / "cam2").iterdir())[-1].unlink()
+    arguments = track_arguments(dataset, tmp_path / "out")
+    arguments[arguments.index("--masks") + 1] = str(masks)
+    error = run_bad(arguments, capsys)
+    assert "29 masks for camera 'cam2' but the targets have 30 frames" in error
+
+
+def test_a_camera_the_calibration_lacks_is_refused(dataset, tmp_path, capsys):
+    error = run_bad(track_arguments(dataset, tmp_path / "out", "--cameras", "cam1,cam9"), capsys)
+    assert "cam9" in error and "cam1" in error
+
+
+def test_an_unreadable_mask_is_refused(dataset, tmp_path, capsys):
+    masks = tmp_path / "masks"
+    shutil.copytree(dataset.masks, masks)
+    sorted((masks / "cam1").iterdir())[0].write_bytes(b"not a png")
+    arguments = track_arguments(dataset, tmp_path / "out")
+    arguments[arguments.index("--masks") + 1] = str(masks)
+    error = run_bad(arguments, capsys)
+    assert "000000.png" in error
+
+
+def test_a_mask_whose_size_is_not_the_calibrations_is_refused(dataset, tmp_path, capsys):
+    cameras = read_calibration(dataset.calibration)
+    calibration = tmp_path / "calibration.toml"
+    import dataclasses
+
+    write_calibration(calibration, [dataclasses.replace(camera, size=(800, 600)) for camera in cameras])
+    arguments = track_arguments(dataset, tmp_path / "out")
+    arguments[arguments.index("--calibration") + 1] = str(calibration)
+    error = run_bad(arguments, capsys)
+    assert "800" in error and "640" in error
+
+
+def test_an_unreadable_video_is_refused(dataset, tmp_path, capsys):
+    videos = tmp_path / "videos"
+    videos.mkdir()
+    (videos / "cam1.mp4").write_bytes(b"garbage")
+    (videos / "cam2.mp4").write_bytes(b"garbage")
+    arguments = track_arguments(dataset, tmp_path / "out")
+    index = arguments.index("--masks")
+    arguments[index : index + 2] = ["--videos", str(videos)]
+    error = run_bad(arguments, capsys)
+    assert "cam1.mp4" in error
+
+
+def test_a_failed_run_leaves_a_previous_outdir_untouched(dataset, tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "keep.txt").write_text("previous results")
+    run_bad(track_arguments(dataset, out, "--cameras", "cam9"), capsys)
+    assert (out / "keep.txt").read_text() == "previous results"
+
+
+def test_the_console_script_is_installed_and_reports_errors_in_one_line(tmp_path):
+    script = Path(sys.executable).with_name("ibik")
+    completed = subprocess.run([str(script), "track", "--targets", str(tmp_path / "none.trc"),
+                                "--no-image", "--out", str(tmp_path / "out")],
+                               capture_output=True, text=True, timeout=120)
+    assert completed.returncode == 2
+    assert completed.stderr.startswith("ibik: error: ") and completed.stderr.count("\n") == 1
