@@ -120,6 +120,25 @@ def support_caps(cameras: Sequence, subject_position: np.ndarray) -> list[float]
     return caps
 
 
+def make_views(cameras: Sequence, masks: Sequence[np.ndarray], caps: Sequence[float]) -> tuple[list[View], list[str]]:
+    """One view per camera from its silhouette; also the names of the cameras whose mask is empty.
+
+    Args:
+        masks: (H, W) bool silhouette per camera; caps: the support's inside cap per camera [px].
+    """
+    if len(masks) != len(cameras):
+        raise InputError(f"expected one silhouette per camera ({len(cameras)}), got {len(masks)}")
+    views, disabled = [], []
+    for camera, mask, cap in zip(cameras, masks, caps):
+        with warnings.catch_warnings():  # empty views are reported per frame instead
+            warnings.simplefilter("ignore", EmptySilhouetteWarning)
+            support = support_from_mask(mask, inside_cap_px=cap)
+        if not support.enabled:
+            disabled.append(camera.name)
+        views.append(View(camera, support))
+    return views, disabled
+
+
 class Tracker:
     """Solves a sequence of frames with one body, one camera set and one solver kept alive."""
 
@@ -194,7 +213,7 @@ class Tracker:
             result.dropped_targets.append([n for n, p in zip(names, present) if not p])
             disabled = []
             if use_image:
-                views, disabled = self._views(silhouettes(frame), caps)
+                views, disabled = make_views(self.cameras, silhouettes(frame), caps)
                 with warnings.catch_warnings():  # empty views are reported per frame instead
                     warnings.simplefilter("ignore", EmptySilhouetteWarning)
                     self.image_task.set_views(views)
@@ -214,19 +233,6 @@ class Tracker:
             if progress is not None:
                 progress()
         return result
-
-    def _views(self, masks: Sequence[np.ndarray], caps: list[float]) -> tuple[list[View], list[str]]:
-        if len(masks) != len(self.cameras):
-            raise InputError(f"expected one silhouette per camera ({len(self.cameras)}), got {len(masks)}")
-        views, disabled = [], []
-        for camera, mask, cap in zip(self.cameras, masks, caps):
-            with warnings.catch_warnings():  # empty views are reported per frame instead
-                warnings.simplefilter("ignore", EmptySilhouetteWarning)
-                support = support_from_mask(mask, inside_cap_px=cap)
-            if not support.enabled:
-                disabled.append(camera.name)
-            views.append(View(camera, support))
-        return views, disabled
 
     def _overlap_per_view(self, configuration: Configuration, disabled: list[str]) -> np.ndarray:
         points = self.image_task.sample_points(configuration)

@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
-import numpy as np
-import pinocchio as pin
-import pytest
+import os
 
-from ibik_pin.limits import JointLimits
-from ibik_pin.model import load_human
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: see ibik_pin/__init__.py
+
+import numpy as np  # noqa: E402
+import pinocchio as pin  # noqa: E402
+import pytest  # noqa: E402
+
+from ibik_pin.limits import JointLimits  # noqa: E402
+from ibik_pin.model import load_human  # noqa: E402
 
 
 @pytest.fixture(scope="session")
