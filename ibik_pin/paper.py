@@ -144,6 +144,27 @@ def subset_views(views: Views, count: int) -> Views:
     return Views(views.cameras[:count], [frame[:count] for frame in views.masks])
 
 
+ESTIMATED = ["LElbow", "RElbow", "LKnee", "RKnee"]
+
+
+@dataclass
+class Run:
+    """One method on one clip: per-frame errors of the estimated joints and the positions found.
+
+    Attributes:
+        joints: the estimated (internal) joints; errors: (F, J) their eq. (9) distances [m].
+        positions: the chain's or the body's keypoint positions per frame [m].
+    """
+
+    joints: list[str]
+    errors: np.ndarray
+    positions: np.ndarray
+
+    @property
+    def mean_error_mm(self) -> float:
+        return float(np.mean(self.errors) * 1000.0)
+
+
 @dataclass(frozen=True)
 class Chain:
     """One of the paper's 3D chains on the human: its keypoints and where its base sits."""
@@ -196,13 +217,17 @@ def run_chain(
     iterations: int = 15,
     target_noise_mm: float = 0.0,
     seed: int = 0,
-) -> np.ndarray:
-    """Track the chain's internal joint through the clip; returns its per-frame error (F,) [m].
+) -> Run:
+    """Track the chain's internal joint through the clip.
 
     Args:
         method: "ik", "pik" or "ibik" (needs views).
         scheme: the solver scheme of "ibik".
         target_noise_mm: Gaussian noise per axis on the end-effector target [mm].
+
+    Returns:
+        errors (F, 1) of the internal joint [m]; positions (F, 3, 3) of base, internal joint and
+        end effector [m].
     """
     chain = CHAINS[chain_name]
     body = _chain_body(chain, clip)
@@ -218,10 +243,10 @@ def run_chain(
         image_task = ImageTask(body, (), samples_per_segment=8)
         levels.append([image_task])
         caps = support_caps(views.cameras, clip.keypoint("Hip")[0])
-    internal_id = body.frame_id("Elbow" if chain.name == "arm" else "Knee")
+    chain_ids = body.frame_ids(list(body.keypoints))  # base, internal joint, end effector
     placements = _base_placements(chain, clip)
     configuration = Configuration(model)
-    errors = np.empty(len(clip.q))
+    positions = np.empty((len(clip.q), 3, 3))
     for frame in range(len(clip.q)):
         model.jointPlacements[1] = placements[frame]
         configuration.update()
@@ -233,11 +258,9 @@ def run_chain(
         if frame == 0:  # the first frame starts from a blind IK, as `ibik track` does
             solver.solve(configuration, levels[:1], iterations=100)
         solver.solve(configuration, levels, iterations=100 if frame == 0 else iterations)
-        errors[frame] = np.linalg.norm(configuration.frame_position(internal_id) - clip.keypoint(chain.internal)[frame])
-    return errors
-
-
-ESTIMATED = ["LElbow", "RElbow", "LKnee", "RKnee"]
+        positions[frame] = configuration.frame_positions(chain_ids)
+    errors = np.linalg.norm(positions[:, 1] - clip.keypoint(chain.internal), axis=1)
+    return Run([chain.internal], errors[:, None], positions)
 
 
 def run_full_body(
@@ -248,11 +271,11 @@ def run_full_body(
     iterations: int = 15,
     target_noise_mm: float = 0.0,
     seed: int = 0,
-) -> np.ndarray:
+) -> Run:
     """Track the whole body from every measured keypoint but the elbows and knees.
 
     Returns:
-        (F, 4) per-frame errors of LElbow, RElbow, LKnee, RKnee [m].
+        errors (F, 4) of LElbow, RElbow, LKnee, RKnee [m]; positions (F, K, 3) of every keypoint.
     """
     names = [name for name in clip.target_names if name not in ESTIMATED]
     indices = [clip.keypoint_names.index(name) for name in names]
@@ -265,4 +288,5 @@ def run_full_body(
     result = tracker.track(names, targets, (lambda frame: views.masks[frame]) if use_image else None)
     estimated = [result.keypoint_names.index(name) for name in ESTIMATED]
     truth = [clip.keypoint_names.index(name) for name in ESTIMATED]
-    return np.linalg.norm(result.keypoints[:, estimated] - clip.keypoints[:, truth], axis=2)
+    errors = np.linalg.norm(result.keypoints[:, estimated] - clip.keypoints[:, truth], axis=2)
+    return Run(list(ESTIMATED), errors, result.keypoints)
