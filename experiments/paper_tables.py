@@ -4,7 +4,7 @@ Jaume-i-Capó et al. 2010 compare IK, PIK and IBIK on HumanEva S1 (box: elbow, w
 Here the motion is real motion capture from ../shared/data (CMU walking, CMU BVH walking, the
 boxing BVH), posed on the project's scaled human (the truth), with silhouettes rendered into
 HumanEva-like cameras (640 x 480, 4 m, around the subject), clean and with realistic defects
-(plus 10 mm target noise). Methods: IK, PIK, IBIK with 1, 2 and 4 views under the Liegeois,
+(plus 5 mm target noise). Methods: IK, PIK, IBIK with 1, 2 and 4 views under the Liegeois,
 priority-stack and QP schemes. Errors: eq. (9), mean distance to the true joint [mm].
 
 Writes into --out: tables.md and results.json (Table 1: arm/boxing elbow, leg/walking knee;
@@ -30,6 +30,7 @@ from matplotlib.figure import Figure
 from ibik_pin.exceptions import IbikWarning
 from ibik_pin.paper import (
     CHAINS,
+    DEFECT_TARGET_NOISE_MM,
     DEFECTS,
     Chain,
     Clip,
@@ -58,7 +59,7 @@ METHODS = [("IK", "ik", None, 0), ("PIK", "pik", None, 0)] + [
     (f"IBIK {views}v {scheme}", "ibik", scheme, views)
     for views in (1, 2, 4) for scheme in ("liegeois", "stack", "qp")
 ]
-CONDITIONS = {"clean": (None, 0.0), "defects": (DEFECTS, 10.0)}
+CONDITIONS = {"clean": (None, 0.0), "defects": (DEFECTS, DEFECT_TARGET_NOISE_MM)}
 
 
 def load_clip(data: Path, name: str, file: str, source: str, window: slice, step: int) -> Clip:
@@ -180,7 +181,7 @@ def main() -> None:
             for label in rows:
                 rows[label].append(float(np.mean([clip[label] for clip in per_clip.values()])))
         sections += [markdown_table(f"Table 1 analogue, {condition} silhouettes"
-                                    + (" (+10 mm target noise)" if condition == "defects" else ""), columns, rows), ""]
+                                    + (f" (+{DEFECT_TARGET_NOISE_MM:.0f} mm target noise)" if condition == "defects" else ""), columns, rows), ""]
     for condition in CONDITIONS:
         for clip_name, per_method in results["table2"][condition].items():
             columns = list(next(iter(per_method.values())))

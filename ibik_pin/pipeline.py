@@ -11,6 +11,7 @@ import json
 import os
 import shutil
 import tempfile
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
@@ -18,7 +19,7 @@ from typing import Sequence
 import numpy as np
 
 from .cameras import POSE2SIM_TRC_TO_WORLD, cameras_in_frame, read_calibration, select_cameras
-from .exceptions import FileFormatError, InputError
+from .exceptions import FileFormatError, IbikWarning, InputError
 from .images import (
     IMAGE_SUFFIXES,
     VideoReader,
@@ -35,6 +36,9 @@ from .scaling import scale_from_stature, scale_human, segment_lengths_from_keypo
 from .tracking import Tracker, TrackingResult, TrackingSettings
 
 VIDEO_SUFFIXES = {".mp4", ".avi", ".mov", ".mkv", ".m4v"}
+# Encoders round frame sizes to macroblocks of 16 px: a video up to 15 px off its calibration's
+# size (Pose2Sim's demo: 1080 px wide, calibrated at 1088) is the same sensor, anything more is not.
+CODEC_ALIGNMENT_PX = 16
 UNIT_TO_METRES = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 # The keypoints joints.trc always holds (estimated ones included), then any other of the model's.
 OUTPUT_KEYPOINTS = ["Hip", "Neck", "Head", "LShoulder", "LElbow", "LWrist", "RShoulder", "RElbow",
@@ -99,23 +103,32 @@ def _check_names(path: Path, names: Sequence[str], body: BodyModel) -> None:
         )
 
 
+def _plain(name: str) -> str:
+    """A name for matching files to cameras: lower case, without separators ("cam_01" ~ "Cam01")."""
+    return "".join(character for character in name.lower() if character.isalnum())
+
+
 def _camera_folder_entries(folder: Path, names: list[str], kind: str) -> dict[str, Path]:
+    """Per camera, its mask sub-folder (--masks) or its video (--videos) in `folder`.
+
+    A sub-folder is named after the camera; a video's file name starts with the camera name. Case
+    and separators are ignored, so Pose2Sim's cam01.mp4 serves the calibration's cam_01.
+    """
     if not folder.is_dir():
         raise FileFormatError(f"--{kind} {folder}: not a folder")
-    entries = {}
-    for name in names:
-        if kind == "masks":
-            match = folder / name
-            if not match.is_dir():
-                raise FileFormatError(f"--masks {folder}: no sub-folder {name!r} for camera {name!r}")
-        else:
-            candidates = sorted(p for p in folder.iterdir()
-                                if p.suffix.lower() in VIDEO_SUFFIXES and p.name.startswith(name))
-            if not candidates:
-                raise FileFormatError(f"--videos {folder}: no video whose file name starts with {name!r}")
-            match = candidates[0]
-        entries[name] = match
-    return entries
+    if kind == "masks":
+        candidates = [p for p in sorted(folder.iterdir()) if p.is_dir()]
+        matches = {name: [p for p in candidates if _plain(p.name) == _plain(name)] for name in names}
+        what = "sub-folder named"
+    else:
+        candidates = [p for p in sorted(folder.iterdir()) if p.suffix.lower() in VIDEO_SUFFIXES]
+        matches = {name: [p for p in candidates if _plain(p.stem).startswith(_plain(name))] for name in names}
+        what = "video whose file name starts with"
+    missing = [name for name, found in matches.items() if not found]
+    if missing:
+        raise FileFormatError(f"--{kind} {folder}: no {what} {missing[0]!r} (the calibration's "
+                              f"cameras: {', '.join(names)})")
+    return {name: found[0] for name, found in matches.items()}
 
 
 def load_silhouettes(job: TrackJob, cameras: list, frame_count: int, progress: bool) -> Silhouettes:
@@ -138,22 +151,38 @@ def load_silhouettes(job: TrackJob, cameras: list, frame_count: int, progress: b
             raise FileFormatError(f"--background {job.background}: not a folder")
         for path in sorted(job.background.iterdir()):
             for name in names:
-                if path.name.startswith(name) and path.suffix.lower() in IMAGE_SUFFIXES | VIDEO_SUFFIXES:
+                if (_plain(path.stem).startswith(_plain(name))
+                        and path.suffix.lower() in IMAGE_SUFFIXES | VIDEO_SUFFIXES):
                     backgrounds[name].append(path)
     masks = []
     with ProgressBar(len(names), "silhouettes", enabled=progress) as bar:
         for name, size in zip(names, sizes):
             with VideoReader(videos[name]) as reader:
-                if tuple(reader.size) != size:
-                    raise InputError(f"--videos {videos[name]}: frames are {reader.size[0]} x "
-                                     f"{reader.size[1]} px but camera {name!r} is {size[0]} x {size[1]} px")
+                video_size = tuple(reader.size)
+            if any(abs(a - b) >= CODEC_ALIGNMENT_PX for a, b in zip(video_size, size)):
+                raise InputError(f"--videos {videos[name]}: frames are {video_size[0]} x "
+                                 f"{video_size[1]} px but camera {name!r} is {size[0]} x {size[1]} px")
             camera_masks = silhouettes_from_video(videos[name], backgrounds[name] or None)
+            if video_size != size:
+                warnings.warn(f"--videos {videos[name]}: frames are {video_size[0]} x {video_size[1]} px, "
+                              f"camera {name!r} {size[0]} x {size[1]} px: silhouettes padded or cropped "
+                              "at the right and bottom (encoder alignment)", IbikWarning, stacklevel=2)
+                camera_masks = [_fit_to_size(mask, size) for mask in camera_masks]
             if len(camera_masks) != frame_count:
                 raise InputError(f"--videos {videos[name]}: {len(camera_masks)} frames but the targets "
                                  f"have {frame_count} frames")
             masks.append(camera_masks)
             bar.update()
     return Silhouettes(None, masks, sizes)
+
+
+def _fit_to_size(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """The mask or image padded with zeros or cropped at the right and bottom to (width, height)."""
+    width, height = size
+    fitted = np.zeros((height, width) + image.shape[2:], dtype=image.dtype)
+    rows, columns = min(height, image.shape[0]), min(width, image.shape[1])
+    fitted[:rows, :columns] = image[:rows, :columns]
+    return fitted
 
 
 def prepare_body(job: TrackJob, names: list[str], targets_m: np.ndarray) -> BodyModel:
@@ -299,7 +328,7 @@ def write_overlays(folder: Path, job: TrackJob, body: BodyModel, cameras: list,
         skeletons = ((camera.project(starts[f]), camera.project(ends[f])) for f in range(len(times)))
         if job.videos is not None:
             reader = VideoReader(_camera_folder_entries(job.videos, [camera.name], "videos")[camera.name])
-            frames = iter(reader)
+            frames = (_fit_to_size(frame, tuple(camera.size)) for frame in reader)
         else:
             reader = None
             width, height = camera.size

@@ -39,7 +39,8 @@ class TrackingSettings:
     Attributes:
         method: solver scheme: "qp" (default), "stack", "liegeois" or "ik".
         iterations: solver steps per frame (the paper: 15).
-        first_frame_iterations: steps for the first frame, which starts from the neutral pose.
+        first_frame_iterations: steps for the first frame, which starts from the neutral pose:
+            that many blind (no image) then that many with every level.
         use_image: False gives the blind baseline (PIK with "qp"/"stack", IK with "ik").
         samples_per_segment: n of eq. (5).
         image_step: largest image step per iteration [rad].
@@ -120,7 +121,9 @@ def support_caps(cameras: Sequence, subject_position: np.ndarray) -> list[float]
     return caps
 
 
-def make_views(cameras: Sequence, masks: Sequence[np.ndarray], caps: Sequence[float]) -> tuple[list[View], list[str]]:
+def make_views(
+    cameras: Sequence, masks: Sequence[np.ndarray], caps: Sequence[float]
+) -> tuple[list[View], list[str]]:
     """One view per camera from its silhouette; also the names of the cameras whose mask is empty.
 
     Args:
@@ -218,8 +221,13 @@ class Tracker:
                     warnings.simplefilter("ignore", EmptySilhouetteWarning)
                     self.image_task.set_views(views)
             result.disabled_views.append(disabled)
-            iterations = self.settings.first_frame_iterations if frame == 0 else self.settings.iterations
             started = time.perf_counter()
+            if frame == 0:
+                # From the neutral pose, a blind IK with the posture prior first: the image level
+                # then starts near the right basin instead of dragging limbs through the trunk.
+                blind = [level for level in levels if self.image_task not in level]
+                self.solver.solve(configuration, blind, iterations=self.settings.first_frame_iterations)
+            iterations = self.settings.first_frame_iterations if frame == 0 else self.settings.iterations
             self.solver.solve(configuration, levels, iterations=iterations)
             result.solve_seconds += time.perf_counter() - started
             result.q[frame] = configuration.q
