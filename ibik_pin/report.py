@@ -12,10 +12,8 @@ import itertools
 import json
 import os
 import re
-import uuid
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import TypeVar
 
 import cv2
 import numpy as np
@@ -23,7 +21,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from .exceptions import FileFormatError, InputError
-from .io.motion import write_text_atomically
+from .io.motion import write_atomically, write_text_atomically
 from .render import draw_skeleton, overlay_mask
 
 __all__ = ["plot_series", "write_html_replay", "write_overlay_video"]
@@ -39,7 +37,6 @@ _UP_AXIS_TO_Y_UP = {
 # Mask pixels drawn as the background when there is no image: grey level (0-255).
 _MASK_GREY = 150
 _MISSING = object()
-_Result = TypeVar("_Result")
 
 
 def plot_series(
@@ -92,7 +89,7 @@ def plot_series(
     axes.grid(True, alpha=0.4)
     axes.legend(loc="best")
     figure.tight_layout()
-    _write_atomically(path, lambda temporary: figure.savefig(temporary, format="png"))
+    write_atomically(path, lambda temporary: figure.savefig(temporary, format="png"))
 
 
 def write_overlay_video(
@@ -169,7 +166,7 @@ def write_overlay_video(
             if writer is not None:
                 writer.release()
 
-    return _write_atomically(path, write)
+    return write_atomically(path, write)
 
 
 def write_html_replay(
@@ -363,25 +360,6 @@ def _open_video_writer(
     return writer
 
 
-def _write_atomically(
-    path: str | os.PathLike[str], write: Callable[[Path], _Result]
-) -> _Result:
-    """Call ``write(temporary)`` then rename the temporary file to `path`; clean up on failure.
-
-    The temporary file is in the destination folder and keeps its suffix (OpenCV picks the
-    container from it).
-    """
-    path = Path(path)
-    temporary = path.with_name(f".{path.stem}.{uuid.uuid4().hex}.tmp{path.suffix}")
-    try:
-        result = write(temporary)
-        os.replace(temporary, path)
-    except BaseException as error:
-        temporary.unlink(missing_ok=True)
-        if isinstance(error, OSError):
-            raise InputError(f"{path}: cannot write: {error}") from error
-        raise
-    return result
 
 
 _HTML_TEMPLATE = r"""<!DOCTYPE html>

@@ -11,12 +11,16 @@ from __future__ import annotations
 
 import os
 import uuid
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 
 from ibik_pin.exceptions import FileFormatError, InputError, UnknownNameError
+
+_Result = TypeVar("_Result")
 
 
 @dataclass
@@ -145,31 +149,36 @@ def is_number(text: str) -> bool:
     return True
 
 
-def write_text_atomically(path: str | os.PathLike[str], text: str) -> None:
-    """Write a text file so that a failure leaves either the old file or none, never half a file.
+def write_atomically(path: str | os.PathLike[str], write: Callable[[Path], _Result]) -> _Result:
+    """Call ``write(temporary)``, then move the temporary file onto `path`; clean up on failure.
 
-    The text goes to a temporary file in the destination folder, which then replaces the
-    destination in one ``os.replace`` (atomic on POSIX and Windows within one file system).
-
-    Args:
-        path: The destination file.
-        text: Its content; ``\\n`` newlines are written as they are.
+    The temporary file is in the destination folder (so ``os.replace`` is atomic on POSIX and
+    Windows) and keeps the suffix (OpenCV picks a container or a format from it).
 
     Raises:
         InputError: The file cannot be written (missing folder, permissions, full disk).
     """
     path = Path(path)
-    # A unique name in the same folder, created with the usual permissions (unlike mkstemp's 0600).
-    temporary = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
+    temporary = path.with_name(f".{path.stem}.{uuid.uuid4().hex}.tmp{path.suffix}")
     try:
-        with open(temporary, "x", encoding="utf-8", newline="\n") as stream:
-            stream.write(text)
+        result = write(temporary)
         os.replace(temporary, path)
     except BaseException as error:
         temporary.unlink(missing_ok=True)
         if isinstance(error, OSError):
             raise InputError(f"{path}: cannot write: {error}") from error
         raise
+    return result
+
+
+def write_text_atomically(path: str | os.PathLike[str], text: str) -> None:
+    """Write text to `path` in one ``os.replace`` (see write_atomically); newlines as given."""
+
+    def write(temporary: Path) -> None:
+        with open(temporary, "x", encoding="utf-8", newline="\n") as stream:
+            stream.write(text)
+
+    write_atomically(path, write)
 
 
 def euler_to_matrices(angles: np.ndarray, axes: str, intrinsic: bool = True) -> np.ndarray:

@@ -26,7 +26,7 @@ from ..configuration import Configuration
 from ..exceptions import InputError
 from ..limits import JointLimits
 from .base import DEFAULT_DAMPING, GradientLevel, Levels, Solver, StepResult, build_levels, report_levels
-from .nullspace import damped_solve, remove_direction, unit_reduced_direction
+from .nullspace import unconstrained_level_step, unit_reduced_direction
 
 UNBOUNDED = 1e20  # proxsuite's stand-in for an infinite bound
 _SOLVED = {
@@ -92,27 +92,21 @@ class HierarchicalQPSolver(Solver):
             size = null_basis.shape[1]
             if level is None or size == 0:
                 continue
-            if isinstance(level, GradientLevel):
-                if level.step_size == 0.0:
-                    continue
-                reduced = unit_reduced_direction(null_basis, level.direction)
-                if reduced is None:
-                    continue
-                unconstrained = level.step_size * reduced
-                remaining = remove_direction(reduced)
-            else:
-                projected = level.A @ null_basis
-                residual = level.b - level.A @ dq
-                unconstrained, remaining = damped_solve(projected, residual, self.damping)
+            step = unconstrained_level_step(level, null_basis, dq, self.damping)
+            if step is None:
+                continue
+            unconstrained, remaining = step
             candidate = dq + null_basis @ unconstrained
             if np.all(candidate >= lower) and np.all(candidate <= upper):
                 w = unconstrained  # no bound active: the QP's optimum is the projection stack's step
             else:
                 if isinstance(level, GradientLevel):
-                    hessian, linear = np.eye(size) / level.step_size, -reduced
+                    hessian = np.eye(size) / level.step_size
+                    linear = -unit_reduced_direction(null_basis, level.direction)
                 else:
+                    projected = level.A @ null_basis
                     hessian = projected.T @ projected + self.damping**2 * np.eye(size)
-                    linear = -projected.T @ residual
+                    linear = -projected.T @ (level.b - level.A @ dq)
                 w = self._solve_level(index, hessian, linear, null_basis, lower - dq, upper - dq)
                 if w is None:
                     failed.add(index)

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .base import GradientLevel
+
 # Singular values below RANK_TOLERANCE * max(1, sigma_max) count as zero for the null space: small
 # enough that lower levels leak < 1e-8 into higher ones, while damping keeps the steps bounded.
 RANK_TOLERANCE = 1e-10
@@ -48,3 +50,24 @@ def unit_reduced_direction(null_basis: np.ndarray, direction: np.ndarray) -> np.
     reduced = null_basis.T @ direction
     norm = np.linalg.norm(reduced)
     return None if norm <= RANK_TOLERANCE else reduced / norm
+
+
+def unconstrained_level_step(level, null_basis: np.ndarray, dq: np.ndarray, damping: float):
+    """A level's optimum without bounds, in null-space coordinates, and the null space it leaves.
+
+    Args:
+        level: a LeastSquaresLevel (damped least squares) or a GradientLevel (step_size along the
+            unit projected gradient).
+        null_basis: Z, shape (nv, r); dq: the higher levels' step, shape (nv,).
+
+    Returns:
+        (w (r,), remaining (r, r')), or None when a gradient level has nothing to climb.
+    """
+    if isinstance(level, GradientLevel):
+        if level.step_size == 0.0:
+            return None
+        reduced = unit_reduced_direction(null_basis, level.direction)
+        if reduced is None:
+            return None
+        return level.step_size * reduced, remove_direction(reduced)
+    return damped_solve(level.A @ null_basis, level.b - level.A @ dq, damping)

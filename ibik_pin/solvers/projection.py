@@ -22,8 +22,8 @@ from ..configuration import Configuration
 from ..exceptions import InputError
 from ..limits import JointLimits
 from ..tasks.base import GradientTask
-from .nullspace import damped_solve, remove_direction, unit_reduced_direction
-from .base import DEFAULT_DAMPING, GradientLevel, Levels, Solver, StepResult, build_levels, report_levels
+from .nullspace import unconstrained_level_step
+from .base import DEFAULT_DAMPING, Levels, Solver, StepResult, build_levels, report_levels
 
 class PriorityStackSolver(Solver):
     """Strict priority stack by recursive null-space projection with damped pseudo-inverses.
@@ -66,16 +66,10 @@ class PriorityStackSolver(Solver):
         for level in built:
             if level is None or null_basis.shape[1] == 0:
                 continue
-            if isinstance(level, GradientLevel):
-                if level.step_size == 0.0:
-                    continue
-                reduced = unit_reduced_direction(null_basis, level.direction)
-                if reduced is None:
-                    continue
-                dq += level.step_size * (null_basis @ reduced)
-                null_basis = null_basis @ remove_direction(reduced)
+            step = unconstrained_level_step(level, null_basis, dq, self.damping)
+            if step is None:
                 continue
-            w, remaining = damped_solve(level.A @ null_basis, level.b - level.A @ dq, self.damping)
+            w, remaining = step
             dq += null_basis @ w
             null_basis = null_basis @ remaining
         return dq
