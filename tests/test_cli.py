@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 import subprocess
@@ -16,6 +17,7 @@ from ibik_pin.cameras import read_calibration, write_calibration
 from ibik_pin.cli import main
 from ibik_pin.demo import ESTIMATED, prepare_demo_inputs
 from ibik_pin.evaluation import mean_joint_errors_mm
+from ibik_pin.exceptions import IbikWarning
 from ibik_pin.io.mot import read_mot
 from ibik_pin.io.trc import read_trc, write_trc
 
@@ -176,8 +178,6 @@ def test_an_unreadable_mask_is_refused(dataset, tmp_path, capsys):
 def test_a_mask_whose_size_is_not_the_calibrations_is_refused(dataset, tmp_path, capsys):
     cameras = read_calibration(dataset.calibration)
     calibration = tmp_path / "calibration.toml"
-    import dataclasses
-
     write_calibration(calibration, [dataclasses.replace(camera, size=(800, 600)) for camera in cameras])
     arguments = track_arguments(dataset, tmp_path / "out")
     arguments[arguments.index("--calibration") + 1] = str(calibration)
@@ -212,3 +212,40 @@ def test_the_console_script_is_installed_and_reports_errors_in_one_line(tmp_path
                                capture_output=True, text=True, timeout=120)
     assert completed.returncode == 2
     assert completed.stderr.startswith("ibik: error: ") and completed.stderr.count("\n") == 1
+
+
+def write_videos(dataset, folder: Path, width: int) -> None:
+    """One mp4 per camera: the masks drawn as a person on a textured still background."""
+    from ibik_pin.images import list_mask_files, read_mask
+
+    folder.mkdir()
+    rng = np.random.default_rng(0)
+    background = rng.integers(0, 90, (480, width, 3), dtype=np.uint8)
+    for camera in ("cam1", "cam2"):
+        writer = cv2.VideoWriter(str(folder / f"{camera}.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), 15, (width, 480))
+        for path in list_mask_files(dataset.masks / camera):
+            frame = background.copy()
+            frame[read_mask(path)[:, :width]] = (40, 200, 230)
+            writer.write(frame)
+        writer.release()
+
+
+def test_videos_drive_track_and_an_encoder_aligned_width_is_padded_with_a_warning(dataset, tmp_path):
+    write_videos(dataset, tmp_path / "videos", width=632)
+    arguments = track_arguments(dataset, tmp_path / "out")
+    index = arguments.index("--masks")
+    arguments[index : index + 2] = ["--videos", str(tmp_path / "videos")]
+    with pytest.warns(IbikWarning, match="frames are 632 x 480 px, camera 'cam1' 640 x 480 px"):
+        assert main(arguments) == 0
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert report["frames"] == 30
+    assert all(value is not None for value in report["overlap_per_view"]["cam1"][5:])
+
+
+def test_a_video_far_from_the_calibrated_size_is_refused(dataset, tmp_path, capsys):
+    write_videos(dataset, tmp_path / "videos", width=600)
+    arguments = track_arguments(dataset, tmp_path / "out")
+    index = arguments.index("--masks")
+    arguments[index : index + 2] = ["--videos", str(tmp_path / "videos")]
+    error = run_bad(arguments, capsys)
+    assert "frames are 600 x 480 px but camera 'cam1' is 640 x 480 px" in error
