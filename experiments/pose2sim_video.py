@@ -1,8 +1,9 @@
 """`ibik track` on a real four-camera video: the Pose2Sim single-person demo (../shared/data).
 
 The targets are Pose2Sim's own triangulation of the demo (ref3d TRC) with the elbows and knees
-removed; the silhouettes come from the real videos by OpenCV background subtraction; the cameras
-from the demo's calibration. IBIK (with the image) and PIK (--no-image) estimate the elbows and
+removed; the full triangulation serves as the static trial that scales the segments (the demo has
+no separate one); the silhouettes come from the real videos by OpenCV background subtraction; the
+cameras from the demo's calibration. IBIK (with the image) and PIK (--no-image) estimate the elbows and
 knees, which are compared with Pose2Sim's triangulated ones. Those are a markerless estimate, not
 ground truth: the figures are agreement, not error.
 
@@ -53,6 +54,7 @@ def main() -> None:
         started = time.perf_counter()
         report = run_track(TrackJob(
             targets=arguments.out / "input" / "targets.trc", calibration=demo / "Calib_qualisys_converted.toml",
+            static=demo / "ref3d" / "S00_P00_T01_BalancingTrial_0-100_filt_butterworth.trc",
             videos=demo / "videos", cameras=cameras, out=arguments.out / variant, overlay=True,
             settings=TrackingSettings(use_image=use_image),
         ))

@@ -45,7 +45,7 @@ from .synthetic import (
     render_silhouettes,
 )
 from .tasks import FramePositionTask, ImageTask, View
-from .tracking import Tracker, TrackingSettings, make_views, support_caps
+from .tracking import Tracker, TrackingSettings, make_views, solve_first_frame, support_caps
 
 SHARED_DATA = Path(__file__).resolve().parent.parent.parent / "shared" / "data"
 
@@ -258,9 +258,10 @@ def run_chain(
             with warnings.catch_warnings():  # an empty view is simply skipped
                 warnings.simplefilter("ignore", EmptySilhouetteWarning)
                 image_task.set_views(make_views(views.cameras, views.masks[frame], caps)[0])
-        if frame == 0:  # the first frame starts from a blind IK, as `ibik track` does
-            solver.solve(configuration, levels[:1], iterations=100)
-        solver.solve(configuration, levels, iterations=100 if frame == 0 else iterations)
+        if frame == 0:  # as `ibik track` does
+            solve_first_frame(solver, configuration, levels, image_task, iterations=100, starts=8)
+        else:
+            solver.solve(configuration, levels, iterations=iterations)
         positions[frame] = configuration.frame_positions(chain_ids)
     errors = np.linalg.norm(positions[:, 1] - clip.keypoint(chain.internal), axis=1)
     return Run([chain.internal], errors[:, None], positions)

@@ -41,6 +41,7 @@ class TrackingSettings:
         iterations: solver steps per frame (the paper: 15).
         first_frame_iterations: steps for the first frame, which starts from the neutral pose:
             that many blind (no image) then that many with every level.
+        first_frame_starts: starts of the first frame (see solve_first_frame).
         use_image: False gives the blind baseline (PIK with "qp"/"stack", IK with "ik").
         samples_per_segment: n of eq. (5).
         image_step: largest image step per iteration [rad].
@@ -50,6 +51,7 @@ class TrackingSettings:
     method: str = "qp"
     iterations: int = 15
     first_frame_iterations: int = 100
+    first_frame_starts: int = 8
     use_image: bool = True
     samples_per_segment: int = 6
     image_step: float = 0.05
@@ -142,6 +144,46 @@ def make_views(
     return views, disabled
 
 
+def solve_first_frame(
+    solver,
+    configuration: Configuration,
+    levels: list[list],
+    image_task: ImageTask | None,
+    iterations: int,
+    starts: int = 1,
+    spread: float = 0.5,
+    seed: int = 0,
+) -> None:
+    """The first frame, from configuration.q: blind IK, then every level; with `starts` > 1 also
+    from random joint angles (a fraction `spread` of each range around the middle, root kept),
+    keeping the solution whose image criterion is highest.
+
+    Later frames warm-start from this one and follow the criterion's local maximum, so a wrong
+    basin on the first frame (an elbow 20 cm off with its forearm still on the silhouette) lasts;
+    several starts make that much rarer.
+    """
+    blind = [level for level in levels if image_task not in level]
+    limits = solver.limits
+    rng = np.random.default_rng(seed)
+    initial = configuration.q.copy()
+    best_q, best_value = None, -np.inf
+    for start in range(max(int(starts), 1) if image_task is not None else 1):
+        q = initial.copy()
+        if start > 0 and limits is not None:
+            middle = 0.5 * (limits.lower + limits.upper)
+            half = 0.5 * spread * (limits.upper - limits.lower)
+            q[limits.q_index] = middle + rng.uniform(-1.0, 1.0, middle.size) * half
+        configuration.update(q)
+        solver.solve(configuration, blind, iterations=iterations)
+        if image_task is None:
+            return
+        solver.solve(configuration, levels, iterations=iterations)
+        value = image_task.compute_value(configuration)
+        if value > best_value:
+            best_q, best_value = configuration.q.copy(), value
+    configuration.update(best_q)
+
+
 class Tracker:
     """Solves a sequence of frames with one body, one camera set and one solver kept alive."""
 
@@ -223,12 +265,11 @@ class Tracker:
             result.disabled_views.append(disabled)
             started = time.perf_counter()
             if frame == 0:
-                # From the neutral pose, a blind IK with the posture prior first: the image level
-                # then starts near the right basin instead of dragging limbs through the trunk.
-                blind = [level for level in levels if self.image_task not in level]
-                self.solver.solve(configuration, blind, iterations=self.settings.first_frame_iterations)
-            iterations = self.settings.first_frame_iterations if frame == 0 else self.settings.iterations
-            self.solver.solve(configuration, levels, iterations=iterations)
+                solve_first_frame(self.solver, configuration, levels,
+                                  self.image_task if use_image else None,
+                                  self.settings.first_frame_iterations, self.settings.first_frame_starts)
+            else:
+                self.solver.solve(configuration, levels, iterations=self.settings.iterations)
             result.solve_seconds += time.perf_counter() - started
             result.q[frame] = configuration.q
             result.keypoints[frame] = configuration.frame_positions(keypoint_ids)
