@@ -173,3 +173,20 @@ def test_qp_objects_are_kept_between_steps(human):
     solver.compute_step(configuration, levels)
     assert len(first) == 3
     assert all(solver._qps[level][1] is qp for level, qp in first.items())
+
+
+def test_proxsuite_level_solution_equals_the_damped_least_squares_step_without_active_bounds():
+    """The QP path itself (not the shortcut taken when no bound is active) matches the stack."""
+    from ibik_pin.solvers.nullspace import damped_solve
+
+    rng = np.random.default_rng(4)
+    solver = HierarchicalQPSolver()
+    for _ in range(20):
+        A, b = rng.normal(size=(9, 42)), rng.normal(size=9)
+        null_basis = np.linalg.qr(rng.normal(size=(42, 30)))[0]
+        projected = A @ null_basis
+        hessian = projected.T @ projected + solver.damping**2 * np.eye(30)
+        w_qp = solver._solve_level(0, hessian, -projected.T @ b, null_basis,
+                                   np.full(42, -1e20), np.full(42, 1e20))
+        w_stack, _ = damped_solve(projected, b, solver.damping)
+        assert np.max(np.abs(w_qp - w_stack)) < 1e-6
