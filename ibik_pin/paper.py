@@ -44,10 +44,9 @@ from .synthetic import (
     render_limb_masks,
     render_silhouettes,
 )
-from .tasks import FramePositionTask, ImageTask, View
+from .tasks import FramePositionTask, ImageTask
 from .tracking import Tracker, TrackingSettings, make_views, solve_first_frame, support_caps
 
-SHARED_DATA = Path(__file__).resolve().parent.parent.parent / "shared" / "data"
 
 # Moderate segmentation defects at HumanEva's 640 x 480: a mask 1 px tight or 2 px loose, a small
 # hole, two shadow or clutter blobs, a forearm or shank lost in 5% of the masks. (Holes of 3 px

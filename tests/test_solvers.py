@@ -1,5 +1,4 @@
 import numpy as np
-import pinocchio as pin
 import pytest
 
 from ibik_pin.configuration import Configuration
