@@ -226,6 +226,7 @@ def run_chain(
         method: "ik", "pik" or "ibik" (needs views).
         scheme: the solver scheme of "ibik".
         target_noise_mm: Gaussian noise per axis on the end-effector target [mm].
+        image_step: largest image step per iteration [rad].
 
     Returns:
         errors (F, 1) of the internal joint [m]; positions (F, 3, 3) of base, internal joint and
