@@ -244,7 +244,7 @@ def test_videos_drive_track_and_an_encoder_aligned_width_is_padded_with_a_warnin
     arguments = track_arguments(dataset, tmp_path / "out")
     index = arguments.index("--masks")
     arguments[index : index + 2] = ["--videos", str(tmp_path / "videos")]
-    with pytest.warns(IbikWarning, match="frames are 632 x 480 px, camera 'cam1' 640 x 480 px"):
+    with pytest.warns(IbikWarning, match="frames are 632 x 480 px, camera 'cam[12]' 640 x 480 px"):
         assert main(arguments) == 0
     report = json.loads((tmp_path / "out" / "report.json").read_text())
     assert report["frames"] == 30
