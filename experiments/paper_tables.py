@@ -4,7 +4,8 @@ Jaume-i-Capó et al. 2010 compare IK, PIK and IBIK on HumanEva S1 (box: elbow, w
 Here the motion is real motion capture from ../shared/data (CMU walking, CMU BVH walking, the
 boxing BVH), posed on the project's scaled human (the truth), with silhouettes rendered into
 HumanEva-like cameras (640 x 480, 4 m, around the subject), clean and with realistic defects
-(plus 5 mm target noise). Methods: IK, PIK, IBIK with 1, 2 and 4 views under the Liegeois,
+(plus 5 mm target noise; IBIK then votes each mask pixel over 3 frames, as `ibik track
+--mask-filter 1`). Methods: IK, PIK, IBIK with 1, 2 and 4 views under the Liegeois,
 priority-stack and QP schemes. Errors: eq. (9), mean distance to the true joint [mm].
 
 Writes into --out: tables.md and results.json (Table 1: arm/boxing elbow, leg/walking knee;
@@ -30,6 +31,7 @@ from matplotlib.figure import Figure
 from ibik_pin.exceptions import IbikWarning
 from ibik_pin.paper import (
     CHAINS,
+    DEFECT_MASK_FILTER_RADIUS,
     DEFECT_TARGET_NOISE_MM,
     DEFECTS,
     Chain,
@@ -40,6 +42,7 @@ from ibik_pin.paper import (
     run_chain,
     run_full_body,
     subset_views,
+    temporally_filtered,
 )
 
 # (name, file, source, frames at the file's rate, step) - windows of real motion.
@@ -72,6 +75,8 @@ def run_methods(kind: str, clip: Clip, condition: str, methods) -> dict:
     """Every method on a clip; kind "arm", "leg" or "body"."""
     defects, noise = CONDITIONS[condition]
     rig = render_views(clip, 4, defects=defects, seed=1)
+    if defects is not None:
+        rig = temporally_filtered(rig, DEFECT_MASK_FILTER_RADIUS)
     results = {}
     for label, method, scheme, views in methods:
         subset = subset_views(rig, views) if views else None

@@ -32,6 +32,9 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-image", action="store_true",
                         help="the same solve without the image criterion (blind baseline)")
     parser.add_argument("--iterations", type=int, default=15, help="solver steps per frame")
+    parser.add_argument("--mask-filter", type=int, default=0, metavar="R",
+                        help="vote each silhouette pixel over the 2R+1 frames around it, to remove "
+                             "segmentation flicker (default 0: off)")
     parser.add_argument("--overlay", action="store_true",
                         help="also write overlay videos, a residual plot and an HTML 3D replay")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -41,6 +44,8 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
 def _job(arguments: argparse.Namespace) -> TrackJob:
     if arguments.iterations < 1:
         raise IbikError(f"--iterations must be >= 1, got {arguments.iterations}")
+    if arguments.mask_filter < 0:
+        raise IbikError(f"--mask-filter must be >= 0 frames, got {arguments.mask_filter}")
     if arguments.background is not None and arguments.videos is None:
         raise IbikError("--background goes with --videos")
     return TrackJob(
@@ -54,7 +59,7 @@ def _job(arguments: argparse.Namespace) -> TrackJob:
         cameras=[name.strip() for name in arguments.cameras.split(",")] if arguments.cameras else None,
         model=arguments.model,
         settings=TrackingSettings(method=arguments.method, iterations=arguments.iterations,
-                                  use_image=not arguments.no_image),
+                                  use_image=not arguments.no_image, mask_filter_radius=arguments.mask_filter),
         overlay=arguments.overlay,
         quiet=arguments.quiet,
     )

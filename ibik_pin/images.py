@@ -15,7 +15,7 @@ import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator, NamedTuple, Sequence, Union
+from typing import Callable, Iterator, NamedTuple, Sequence, Union
 
 import cv2
 import numpy as np
@@ -26,6 +26,7 @@ __all__ = [
     "IMAGE_SUFFIXES",
     "SupportImage",
     "SupportSample",
+    "TemporalMajority",
     "VideoReader",
     "list_mask_files",
     "obstacle_support",
@@ -334,6 +335,46 @@ def list_mask_files(folder: PathLike) -> list[Path]:
             f"mask folder '{folder}': expected image files ({', '.join(sorted(IMAGE_SUFFIXES))}), found none"
         )
     return sorted(files, key=_natural_key)
+
+
+class TemporalMajority:
+    """Silhouettes with single-frame flicker voted away: each pixel of a camera's mask at frame t
+    is the majority over frames t - radius .. t + radius (the first and last frames repeated at
+    the ends of the sequence).
+
+    Segmentation errors that last one or two frames (a hole, a passing shadow, a forearm lost
+    against the background) are outvoted by the frames around them; a limb moves a few pixels at
+    most between neighbouring frames at 50-120 Hz, so clean masks change little. Masks are read
+    once each, in frame order, and only the 2 * radius + 1 frames of the window are kept.
+
+    Args:
+        source: frame index -> one (H, W) bool mask per camera.
+        frame_count: number of frames of the sequence.
+        radius: half window [frames], >= 1.
+    """
+
+    def __init__(self, source: Callable[[int], Sequence[np.ndarray]], frame_count: int, radius: int = 1) -> None:
+        if isinstance(radius, bool) or int(radius) != radius or radius < 1:
+            raise InputError(f"radius: expected a whole number of frames >= 1, got {radius!r}")
+        if int(frame_count) != frame_count or frame_count < 1:
+            raise InputError(f"frame_count: expected a positive whole number, got {frame_count!r}")
+        self.source = source
+        self.frame_count = int(frame_count)
+        self.radius = int(radius)
+        self._window: dict[int, list[np.ndarray]] = {}
+
+    def __call__(self, frame: int) -> list[np.ndarray]:
+        # The ends repeat the first and last frames (as a median filter's edge replication).
+        indices = [min(max(index, 0), self.frame_count - 1)
+                   for index in range(frame - self.radius, frame + self.radius + 1)]
+        for old in [index for index in self._window if index not in indices]:
+            del self._window[old]
+        for index in indices:
+            if index not in self._window:
+                self._window[index] = [_as_mask(mask) for mask in self.source(index)]
+        window = [self._window[index] for index in indices]
+        return [2 * np.sum([masks[camera] for masks in window], axis=0, dtype=np.int32) > len(window)
+                for camera in range(len(window[0]))]
 
 
 class VideoReader:

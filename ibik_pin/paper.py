@@ -27,6 +27,7 @@ import pinocchio as pin
 
 from .configuration import Configuration
 from .exceptions import EmptySilhouetteWarning
+from .images import TemporalMajority
 from .io.asf_amc import read_asf_amc
 from .io.bvh import CMU_BVH_SCALE, read_bvh
 from .io.motion import SkeletonMotion
@@ -54,6 +55,9 @@ from .tracking import Tracker, TrackingSettings, make_views, solve_first_frame, 
 DEFECTS = SilhouetteDefects(erode_px=1, dilate_px=2, holes=1, hole_radius_px=2.0, blobs=2,
                             blob_radius_px=10.0, missing_limb_probability=0.05)
 DEFECT_TARGET_NOISE_MM = 5.0
+# With defects, IBIK reads the masks as `ibik track --mask-filter 1` does: each pixel voted over 3
+# frames, which removes the one-frame holes, blobs and lost limbs above (not the erosion/dilation).
+DEFECT_MASK_FILTER_RADIUS = 1
 
 
 @dataclass
@@ -138,6 +142,12 @@ def render_views(clip: Clip, count: int, defects: SilhouetteDefects | None = Non
                            for mask, camera in zip(frame_masks, cameras)]
         masks.append(frame_masks)
     return Views(cameras, masks)
+
+
+def temporally_filtered(views: Views, radius: int) -> Views:
+    """The same cameras with every camera's masks voted over 2 radius + 1 frames (TemporalMajority)."""
+    vote = TemporalMajority(lambda frame: views.masks[frame], len(views.masks), radius)
+    return Views(views.cameras, [vote(frame) for frame in range(len(views.masks))])
 
 
 def subset_views(views: Views, count: int) -> Views:

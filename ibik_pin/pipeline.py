@@ -290,6 +290,7 @@ def write_outputs(folder: Path, job: TrackJob, trc: TrcData, body: BodyModel, ca
         "method": job.settings.method,
         "image": bool(job.settings.use_image),
         "iterations_per_frame": job.settings.iterations,
+        "mask_filter_radius": job.settings.mask_filter_radius,
         "solve_frames_per_second": result.frames_per_second,
         "cameras": [camera.name for camera in cameras] if job.settings.use_image else [],
         "end_effector_residual_m": {

@@ -18,7 +18,7 @@ import pinocchio as pin
 
 from .configuration import Configuration
 from .exceptions import EmptySilhouetteWarning, InputError
-from .images import support_from_mask
+from .images import TemporalMajority, support_from_mask
 from .limits import JointLimits
 from .model import BodyModel
 from .solvers import make_solver
@@ -49,6 +49,8 @@ class TrackingSettings:
         samples_per_segment: n of eq. (5).
         image_step: largest image step per iteration [rad].
         posture_weight: weight of the posture prior (lowest level).
+        mask_filter_radius: with r > 0, each silhouette pixel is the majority over the 2r + 1
+            frames around it (images.TemporalMajority), removing one-frame segmentation flicker.
     """
 
     method: str = "qp"
@@ -59,6 +61,7 @@ class TrackingSettings:
     samples_per_segment: int = 6
     image_step: float = 0.05
     posture_weight: float = 1e-2
+    mask_filter_radius: int = 0
 
 
 @dataclass
@@ -242,6 +245,8 @@ class Tracker:
         if use_image and silhouettes is None:
             raise InputError("the image criterion needs silhouettes: give masks or videos, or --no-image")
         frame_count = targets.shape[0]
+        if use_image and self.settings.mask_filter_radius > 0:
+            silhouettes = TemporalMajority(silhouettes, frame_count, self.settings.mask_filter_radius)
         levels = self._levels(names)
         keypoint_names = list(self.body.keypoints)
         keypoint_ids = self.body.frame_ids(keypoint_names)

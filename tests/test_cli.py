@@ -93,6 +93,13 @@ def test_the_report_and_mot_are_readable(runs):
     assert mot.in_degrees and mot.values.shape[0] == 30
 
 
+def test_the_mask_filter_runs_and_is_reported(dataset, tmp_path):
+    assert main(track_arguments(dataset, tmp_path / "filtered", "--mask-filter", "1")) == 0
+    report = json.loads((tmp_path / "filtered" / "report.json").read_text())
+    assert report["mask_filter_radius"] == 1
+    assert report["end_effector_residual_m"]["mean"] < 0.01
+
+
 def test_the_overlay_video_decodes_to_one_frame_per_input_frame(runs):
     folder, _ = runs
     capture = cv2.VideoCapture(str(folder / "ibik" / "overlay_cam1.mp4"))
@@ -157,6 +164,11 @@ def test_a_frame_count_that_differs_from_the_masks_is_refused(dataset, tmp_path,
     arguments[arguments.index("--masks") + 1] = str(masks)
     error = run_bad(arguments, capsys)
     assert "29 masks for camera 'cam2' but the targets have 30 frames" in error
+
+
+def test_a_negative_mask_filter_is_refused(dataset, tmp_path, capsys):
+    error = run_bad(track_arguments(dataset, tmp_path / "out", "--mask-filter", "-1"), capsys)
+    assert "--mask-filter" in error
 
 
 def test_a_camera_the_calibration_lacks_is_refused(dataset, tmp_path, capsys):

@@ -11,6 +11,7 @@ import pytest
 from ibik_pin.exceptions import EmptySilhouetteWarning, FileFormatError, InputError
 from ibik_pin.images import (
     SupportImage,
+    TemporalMajority,
     VideoReader,
     list_mask_files,
     obstacle_support,
@@ -280,3 +281,51 @@ def test_the_first_frames_of_the_pose2sim_demo_video_are_read():
     assert len(frames) == 3 and frames[0].shape == (1920, 1080, 3) and frames[0].dtype == np.uint8
     masks = silhouettes_from_video(DEMO_VIDEO, max_frames=4)
     assert len(masks) == 4 and masks[0].shape == (1920, 1080)
+
+
+def flickering_sequence(frames: int = 7):
+    """A disc moving 1 px per frame in two cameras; frame 3 of camera 0 has a hole and a blob."""
+    masks = []
+    for frame in range(frames):
+        views = [disc_mask((80, 60), (30 + frame, 30), 12), disc_mask((90, 70), (40, 35 - frame), 10)]
+        if frame == 3:
+            views[0] = views[0].copy()
+            views[0][27:33, 27:33] = False  # a hole in the body
+            views[0][5:12, 60:70] = True  # a shadow away from it
+        masks.append(views)
+    return masks
+
+
+def test_temporal_majority_votes_away_one_frame_flicker_and_keeps_the_motion():
+    masks = flickering_sequence()
+    filtered = TemporalMajority(lambda frame: masks[frame], len(masks), radius=1)
+    clean_frame_3 = disc_mask((80, 60), (33, 30), 12)
+    result = filtered(3)
+    assert len(result) == 2 and result[0].dtype == np.bool_
+    # The hole and the blob are gone; only the disc's edge, shifted 1 px a frame, may differ.
+    assert result[0][27:33, 27:33].all() and not result[0][5:12, 60:70].any()
+    assert np.count_nonzero(result[0] ^ clean_frame_3) <= 2 * 2 * 12
+    assert intersection_over_union(result[1], masks[3][1]) > 0.9
+    # The ends repeat the first and last frames: a clean sequence end is itself.
+    np.testing.assert_array_equal(filtered(0)[1], masks[0][1])
+    np.testing.assert_array_equal(filtered(6)[0], masks[6][0])
+
+
+def test_temporal_majority_reads_each_frame_once_in_order():
+    masks = flickering_sequence()
+    reads = []
+
+    def source(frame):
+        reads.append(frame)
+        return masks[frame]
+
+    filtered = TemporalMajority(source, len(masks), radius=2)
+    for frame in range(len(masks)):
+        filtered(frame)
+    assert reads == list(range(len(masks)))
+
+
+@pytest.mark.parametrize("radius", [0, -1, 1.5, True])
+def test_temporal_majority_rejects_a_radius_that_is_not_a_positive_whole_number(radius):
+    with pytest.raises(InputError, match="radius"):
+        TemporalMajority(lambda frame: [], 5, radius=radius)

@@ -4,6 +4,7 @@ import pytest
 from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError, UnknownNameError
 from ibik_pin.limits import JointLimits
+from ibik_pin.model import load_arm
 from ibik_pin.solvers import (
     DampedLeastSquaresSolver,
     HierarchicalQPSolver,
@@ -189,3 +190,37 @@ def test_proxsuite_level_solution_equals_the_damped_least_squares_step_without_a
                                    np.full(42, -1e20), np.full(42, 1e20))
         w_stack, _ = damped_solve(projected, b, solver.damping)
         assert np.max(np.abs(w_qp - w_stack)) < 1e-6
+
+
+class PullingAgainstTheWrist(GradientTask):
+    """A criterion whose gradient mostly pulls the wrist off its target (the row space of the
+    higher level) while its small null-space remainder reverses at every evaluation."""
+
+    def __init__(self, wrist_task, max_step_size=0.05):
+        super().__init__(max_step_size)
+        self.wrist_task = wrist_task
+        self.evaluations = 0
+
+    def compute_value(self, configuration):
+        return 0.0
+
+    def compute_gradient(self, configuration):
+        jacobian = self.wrist_task.compute_jacobian(configuration)
+        null_direction = np.linalg.svd(jacobian)[2][-1]
+        self.evaluations += 1
+        return jacobian.T @ np.array([1.0, 0.0, 0.0]) + 0.01 * (-1) ** self.evaluations * null_direction
+
+
+@pytest.mark.parametrize("solver_name", ["liegeois", "stack", "qp"])
+def test_the_image_step_halves_when_its_projected_direction_reverses(solver_name):
+    body = load_arm()
+    configuration = Configuration(body.model, np.array([0.3, 0.4, 0.2, 0.9, 0.1, 0.5]))
+    wrist = FramePositionTask(body.model, body.keypoints["Wrist"])
+    wrist.set_target(configuration.frame_position(body.frame_id("Wrist")).copy())
+    criterion = PullingAgainstTheWrist(wrist)
+    start = configuration.q.copy()
+    make_solver(solver_name, limits=JointLimits(body.model)).solve(configuration, [[wrist], [criterion]], iterations=12)
+    # The raw gradient never reverses; the direction actually taken does, so the step halves at
+    # every iteration (down to its floor) and the arm moves less than two first steps in all.
+    assert criterion.step_size == pytest.approx(criterion.min_step_size)
+    assert np.linalg.norm(configuration.q - start) < 2 * 0.05

@@ -37,11 +37,22 @@ class LeastSquaresLevel:
 
 @dataclass
 class GradientLevel:
-    """Ascent along a unit direction with a step norm of at most `step_size`."""
+    """Ascent along a unit direction with a step norm the task adapts to the direction taken.
 
-    direction: np.ndarray  # (nv,)
-    step_size: float
+    The solver projects `direction` into the null space of the higher levels and calls
+    `step_size_along` with the result once per step (later calls, e.g. after clamping a joint,
+    reuse the first answer).
+    """
+
+    direction: np.ndarray  # (nv,) unit gradient, zeros when it vanishes
     value: float  # the criterion h(q) before the step
+    task: GradientTask
+    step_size: float = 0.0
+
+    def step_size_along(self, taken: np.ndarray) -> float:
+        if self.step_size == 0.0:
+            self.step_size = self.task.adapt_step(taken)
+        return self.step_size
 
 
 @dataclass
@@ -102,8 +113,7 @@ def build_levels(configuration: Configuration, levels: Levels) -> list:
                     "(the image criterion) must be alone in its level"
                 )
             task = gradient_tasks[0]
-            direction, step_size = task.compute_direction(configuration)
-            built.append(GradientLevel(direction, step_size, task.compute_value(configuration)))
+            built.append(GradientLevel(task.compute_direction(configuration), task.compute_value(configuration), task))
         elif tasks:
             rows = [task.compute_linear_system(configuration) for task in tasks]
             built.append(LeastSquaresLevel(np.vstack([A for A, _ in rows]),

@@ -56,18 +56,17 @@ def unconstrained_level_step(level, null_basis: np.ndarray, dq: np.ndarray, damp
     """A level's optimum without bounds, in null-space coordinates, and the null space it leaves.
 
     Args:
-        level: a LeastSquaresLevel (damped least squares) or a GradientLevel (step_size along the
-            unit projected gradient).
+        level: a LeastSquaresLevel (damped least squares) or a GradientLevel (its adapted step size
+            along the unit projected gradient).
         null_basis: Z, shape (nv, r); dq: the higher levels' step, shape (nv,).
 
     Returns:
         (w (r,), remaining (r, r')), or None when a gradient level has nothing to climb.
     """
     if isinstance(level, GradientLevel):
-        if level.step_size == 0.0:
-            return None
         reduced = unit_reduced_direction(null_basis, level.direction)
         if reduced is None:
             return None
-        return level.step_size * reduced, remove_direction(reduced)
+        step_size = level.step_size_along(null_basis @ reduced)
+        return step_size * reduced, remove_direction(reduced)
     return damped_solve(level.A @ null_basis, level.b - level.A @ dq, damping)

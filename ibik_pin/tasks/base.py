@@ -5,7 +5,8 @@
 - `GradientTask`: a scalar criterion h(q) to maximise (the image overlap of eq. 5-6). A step moves
   along its unit gradient with a norm of at most `step_size` (DESIGN.md: a normalised secondary
   step converges where the raw gradient, in pixels per radian, does not). The step size adapts
-  like Rprop: halved when the gradient reverses, grown back while it keeps its direction.
+  like Rprop on the direction the solver actually takes (the gradient projected into what the
+  higher levels leave free): halved when that direction reverses, grown back while it holds.
 """
 
 from __future__ import annotations
@@ -90,22 +91,28 @@ class GradientTask(ABC):
     def compute_gradient(self, configuration: Configuration) -> np.ndarray:
         """dh/dv, shape (nv,)."""
 
-    def compute_direction(self, configuration: Configuration) -> tuple[np.ndarray, float]:
-        """Unit ascent direction and the adapted step size for this step.
-
-        Returns:
-            direction: gradient / |gradient|, shape (nv,) (zeros if the gradient vanishes).
-            step_size: norm bound of the step along it.
-        """
+    def compute_direction(self, configuration: Configuration) -> np.ndarray:
+        """Unit ascent direction gradient / |gradient|, shape (nv,) (zeros if it vanishes)."""
         gradient = self.compute_gradient(configuration)
         norm = np.linalg.norm(gradient)
         if norm == 0.0 or not np.isfinite(norm):
-            return np.zeros_like(gradient), 0.0
-        direction = gradient / norm
+            return np.zeros_like(gradient)
+        return gradient / norm
+
+    def adapt_step(self, taken: np.ndarray) -> float:
+        """The step size along `taken`, the unit direction the solver will step along this
+        iteration (the gradient projected into the null space of the higher levels).
+
+        Adapting on the projected direction rather than on the raw gradient matters: when most of
+        the gradient pulls against a higher level (a forearm on a dilated silhouette pulling the
+        wrist off its target), the small remainder left in the null space flips from one
+        iteration to the next. Rprop on the raw gradient never sees the flips and keeps taking
+        full steps back and forth; here they halve the step, so noise cannot walk the limb away.
+        """
         if self._previous_direction is not None:
-            if direction @ self._previous_direction < 0.0:
+            if taken @ self._previous_direction < 0.0:
                 self.step_size = max(0.5 * self.step_size, self.min_step_size)
             else:
                 self.step_size = min(1.2 * self.step_size, self.max_step_size)
-        self._previous_direction = direction
-        return direction, self.step_size
+        self._previous_direction = taken
+        return self.step_size
