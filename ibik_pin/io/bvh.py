@@ -14,14 +14,14 @@ Conventions, those of the format:
 from __future__ import annotations
 
 import os
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
-from ibik_pin.exceptions import FileFormatError, IbikWarning, InputError
+from ibik_pin.exceptions import FileFormatError, InputError
 from ibik_pin.io.motion import (
     SkeletonMotion,
+    check_declared_count,
     euler_to_matrices,
     is_number,
     matrices_to_euler,
@@ -263,17 +263,7 @@ def read_bvh(path: str | os.PathLike[str], scale: float | None = None) -> BvhMot
             raise FileFormatError(
                 f"{path}, line {number}: expected {channel_count} channel values, got {len(row)}"
             )
-    if len(rows) < declared_frames:
-        raise FileFormatError(
-            f"{path}: Frames is {declared_frames} but the file holds {len(rows)} frames"
-        )
-    if len(rows) > declared_frames:
-        warnings.warn(
-            f"{path}: Frames is {declared_frames} but the file holds {len(rows)} frames; "
-            f"all frames are kept",
-            IbikWarning,
-            stacklevel=2,
-        )
+    check_declared_count(path, "Frames", declared_frames, len(rows), "frames")
     try:
         channel_values = np.array(rows, dtype=float).reshape(len(rows), channel_count)
     except ValueError:

@@ -18,13 +18,12 @@ text before ``endheader``, as OpenSim writes them.
 from __future__ import annotations
 
 import os
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
-from ibik_pin.exceptions import FileFormatError, IbikWarning, InputError
-from ibik_pin.io.motion import is_number, read_text, write_text_atomically
+from ibik_pin.exceptions import FileFormatError, InputError
+from ibik_pin.io.motion import check_declared_count, is_number, read_text, write_text_atomically
 
 
 @dataclass
@@ -165,17 +164,7 @@ def read_mot(path: str | os.PathLike[str]) -> MotData:
     row_numbers = [
         number for number in range(end_index + 3, len(lines) + 1) if lines[number - 1].strip()
     ]
-    if len(row_numbers) < declared_rows:
-        raise FileFormatError(
-            f"{path}: nRows is {declared_rows} but the file holds {len(row_numbers)} rows"
-        )
-    if len(row_numbers) > declared_rows:
-        warnings.warn(
-            f"{path}: nRows is {declared_rows} but the file holds {len(row_numbers)} rows; "
-            f"all rows are kept",
-            IbikWarning,
-            stacklevel=2,
-        )
+    check_declared_count(path, "nRows", declared_rows, len(row_numbers), "rows")
     table = np.empty((len(row_numbers), len(labels)))
     for row_index, number in enumerate(row_numbers):
         cells = lines[number - 1].split()

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import uuid
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,7 +19,7 @@ from typing import TypeVar
 
 import numpy as np
 
-from ibik_pin.exceptions import FileFormatError, InputError, UnknownNameError
+from ibik_pin.exceptions import FileFormatError, IbikWarning, InputError, UnknownNameError
 
 _Result = TypeVar("_Result")
 
@@ -147,6 +148,17 @@ def is_number(text: str) -> bool:
     except ValueError:
         return False
     return True
+
+
+def check_declared_count(path, key: str, declared: int, found: int, what: str) -> None:
+    """Compare a header's declared count of rows (TRC NumFrames, MOT nRows, BVH Frames) with the
+    rows the file holds: fewer is a FileFormatError, more are kept with an IbikWarning that points
+    at the reader's caller."""
+    message = f"{path}: {key} is {declared} but the file holds {found} {what}"
+    if found < declared:
+        raise FileFormatError(message)
+    if found > declared:
+        warnings.warn(f"{message}; all {what} are kept", IbikWarning, stacklevel=3)
 
 
 def write_atomically(path: str | os.PathLike[str], write: Callable[[Path], _Result]) -> _Result:

@@ -17,14 +17,13 @@ from __future__ import annotations
 
 import math
 import os
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ibik_pin.exceptions import FileFormatError, IbikWarning, InputError
-from ibik_pin.io.motion import is_number, read_text, write_text_atomically
+from ibik_pin.exceptions import FileFormatError, InputError
+from ibik_pin.io.motion import check_declared_count, is_number, read_text, write_text_atomically
 
 #: Metres per unit for the units a TRC file may declare.
 METRES_PER_UNIT = {"m": 1.0, "cm": 0.01, "mm": 0.001}
@@ -170,18 +169,7 @@ def read_trc(path: str | os.PathLike[str]) -> TrcData:
         )
     column_count = 2 + 3 * declared_markers
     row_numbers = [number for number in range(6, len(lines) + 1) if lines[number - 1].strip()]
-    if len(row_numbers) < declared_frames:
-        raise FileFormatError(
-            f"{path}: NumFrames is {declared_frames} but the file holds {len(row_numbers)} "
-            f"data rows"
-        )
-    if len(row_numbers) > declared_frames:
-        warnings.warn(
-            f"{path}: NumFrames is {declared_frames} but the file holds {len(row_numbers)} data "
-            f"rows; all rows are kept",
-            IbikWarning,
-            stacklevel=2,
-        )
+    check_declared_count(path, "NumFrames", declared_frames, len(row_numbers), "data rows")
     frame_numbers = np.empty(len(row_numbers), dtype=int)
     times = np.empty(len(row_numbers))
     coordinates = np.full((len(row_numbers), column_count - 2), np.nan)
