@@ -21,14 +21,14 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from ibik_pin.cameras import look_at_camera
 from ibik_pin.configuration import Configuration
 from ibik_pin.limits import JointLimits
 from ibik_pin.model import HUMAN_END_EFFECTORS, load_human
-from ibik_pin.render import render_capsules
-from ibik_pin.images import support_from_mask
 from ibik_pin.solvers import make_solver
 from ibik_pin.tasks import FramePositionTask, ImageTask, PostureTask, View
+from ibik_pin.vision.camera import look_at_camera
+from ibik_pin.vision.render import render_capsules
+from ibik_pin.vision.support import support_from_mask
 
 
 def random_reachable_targets(body, rng) -> dict[str, np.ndarray]:
@@ -62,7 +62,8 @@ def time_ibik(body, targets, scheme: str, steps: int) -> dict:
 def time_pink(body, targets, solver_name: str, steps: int) -> dict | None:
     try:
         import pink
-        from pink.tasks import FrameTask, PostureTask as PinkPosture
+        from pink.tasks import FrameTask
+        from pink.tasks import PostureTask as PinkPosture
     except ImportError:
         return None
     model = body.model

@@ -27,9 +27,7 @@ import cv2
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-
-from ibik_pin.exceptions import IbikWarning
-from ibik_pin.paper import (
+from paper.section4 import (
     CHAINS,
     DEFECT_MASK_FILTER_RADIUS,
     DEFECT_TARGET_NOISE_MM,
@@ -44,6 +42,8 @@ from ibik_pin.paper import (
     subset_views,
     temporally_filtered,
 )
+
+from ibik_pin.exceptions import IbikWarning
 
 # (name, file, source, frames at the file's rate, step) - windows of real motion.
 WALKING = [

@@ -24,8 +24,8 @@ import numpy as np
 
 from ibik_pin.evaluation import mean_joint_errors_mm
 from ibik_pin.io.trc import TrcData, read_trc, write_trc
-from ibik_pin.pipeline import TrackJob, run_track
-from ibik_pin.tracking import TrackingSettings
+from ibik_pin.tracking.pipeline import TrackJob, run_track
+from ibik_pin.tracking.tracker import TrackingSettings
 
 ESTIMATED = ["LElbow", "RElbow", "LKnee", "RKnee"]
 VARIANTS = {  # name -> (use the image, cameras)

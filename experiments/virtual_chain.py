@@ -19,8 +19,9 @@ from pathlib import Path
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from paper.virtual_scenes import PAPER_EXPERIMENTS, PlanarRun, run_paper_experiment
 
-from ibik_pin.virtual import PAPER_EXPERIMENTS, PlanarRun, PlanarScene, run_paper_experiment
+from ibik_pin.synthetic.planar import PlanarScene
 
 SHOWN_ITERATIONS = (0, 2, 5, 10, 20, 50, 100, 200)
 

@@ -10,10 +10,10 @@ import sys
 import warnings
 from pathlib import Path
 
-from .exceptions import IbikError
-from .pipeline import TrackJob, run_track
-from .solvers import SOLVERS
-from .tracking import TrackingSettings
+from ibik_pin.exceptions import IbikError
+from ibik_pin.solvers import SOLVERS
+from ibik_pin.tracking.pipeline import TrackJob, run_track
+from ibik_pin.tracking.tracker import TrackingSettings
 
 
 def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
@@ -92,7 +92,7 @@ def main(argv: list[str] | None = None) -> int:
                       f"{report['solve_frames_per_second']:.1f} frames/s, mean end-effector residual "
                       f"{1000 * report['end_effector_residual_m']['mean']:.1f} mm")
         else:
-            from .demo import run_demo
+            from ibik_pin.demo import run_demo
 
             run_demo(arguments.out, quiet=arguments.quiet)
     except (IbikError, OSError) as error:

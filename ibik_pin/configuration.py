@@ -7,7 +7,7 @@ import itertools
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import InputError
+from ibik_pin.exceptions import InputError
 
 _WORLD_ALIGNED = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 _KINEMATIC_STATES = itertools.count(1)  # one number per update, unique across all configurations

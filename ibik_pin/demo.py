@@ -15,14 +15,16 @@ from pathlib import Path
 
 import numpy as np
 
-from .evaluation import mean_joint_errors_mm
-from .io.asf_amc import read_asf_amc
-from .io.trc import TrcData, read_trc, write_trc
-from .model import load_human
-from .pipeline import TrackJob, run_track
-from .scaling import scale_human, segment_lengths_from_keypoints
-from .synthetic import humaneva_rig, keypoints_from_motion, pose_model_to_keypoints, write_dataset
-from .tracking import TrackingSettings
+from ibik_pin.evaluation import mean_joint_errors_mm
+from ibik_pin.io.asf_amc import read_asf_amc
+from ibik_pin.io.trc import TrcData, read_trc, write_trc
+from ibik_pin.model import load_human
+from ibik_pin.subject.scaling import scale_human, segment_lengths_from_keypoints
+from ibik_pin.synthetic.dataset import write_dataset
+from ibik_pin.synthetic.mocap import keypoints_from_motion, pose_model_to_keypoints
+from ibik_pin.synthetic.rig import humaneva_rig
+from ibik_pin.tracking.pipeline import TrackJob, run_track
+from ibik_pin.tracking.tracker import TrackingSettings
 
 DATA = Path(__file__).resolve().parent / "data"
 ESTIMATED = ["LElbow", "RElbow", "LKnee", "RKnee"]

@@ -6,7 +6,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .exceptions import InputError
+from ibik_pin.exceptions import InputError
 
 
 def per_frame_errors(estimated: np.ndarray, truth: np.ndarray) -> np.ndarray:

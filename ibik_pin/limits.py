@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import InputError
+from ibik_pin.exceptions import InputError
 
 
 class JointLimits:

@@ -8,15 +8,15 @@ keypoint pairs are the segments projected into the images (eq. 5), and how thick
 from __future__ import annotations
 
 import sys
+from importlib import resources
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import FileFormatError, InputError, UnknownNameError
+from ibik_pin.exceptions import FileFormatError, InputError, UnknownNameError
 
-MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
 HUMAN_URDF_RELATIVE = Path("example-robot-data/robots/human_description/robots/human.urdf")
 
 
@@ -184,9 +184,14 @@ def load_human(urdf_path: str | Path | None = None, free_flyer: bool = True) -> 
     )
 
 
+def _project_model(file_name: str) -> Path:
+    """Path of one of the project's URDFs (models/ in the repository, ibik_pin.models installed)."""
+    return Path(str(resources.files("ibik_pin.models").joinpath(file_name)))
+
+
 def load_planar_chain() -> BodyModel:
     """The paper's planar chain (Figs. 6-8): 4 segments of 0.25 m, 4 revolute joints about Z."""
-    model = load_urdf(MODELS_DIR / "planar_chain.urdf")
+    model = load_urdf(_project_model("planar_chain.urdf"))
     keypoints = {f"joint_{i}": f"joint_{i}" for i in range(1, 5)}
     keypoints["end_effector"] = "end_effector"
     names = list(keypoints)
@@ -201,7 +206,7 @@ def load_planar_chain() -> BodyModel:
 
 def load_arm() -> BodyModel:
     """The paper's 3D arm: shoulder and elbow of 3 DOF each, end effector at the wrist."""
-    model = load_urdf(MODELS_DIR / "arm.urdf")
+    model = load_urdf(_project_model("arm.urdf"))
     return BodyModel(
         model=model,
         keypoints={"Shoulder": "shoulder_Z", "Elbow": "elbow_Z", "Wrist": "wrist"},
@@ -213,7 +218,7 @@ def load_arm() -> BodyModel:
 
 def load_leg() -> BodyModel:
     """The paper's 3D leg: hip and knee of 3 DOF each, end effector at the ankle."""
-    model = load_urdf(MODELS_DIR / "leg.urdf")
+    model = load_urdf(_project_model("leg.urdf"))
     return BodyModel(
         model=model,
         keypoints={"Hip": "hip_Z", "Knee": "knee_Z", "Ankle": "ankle"},

@@ -8,7 +8,7 @@ import time
 from collections.abc import Callable
 from typing import TextIO
 
-from .exceptions import InputError
+from ibik_pin.exceptions import InputError
 
 __all__ = ["ProgressBar"]
 

@@ -10,8 +10,8 @@ import numpy as np  # noqa: E402
 import pinocchio as pin  # noqa: E402
 import pytest  # noqa: E402
 
-from ibik_pin.limits import JointLimits  # noqa: E402
-from ibik_pin.model import load_human  # noqa: E402
+from ibik_pin.limits import JointLimits
+from ibik_pin.model import load_human
 
 
 @pytest.fixture(scope="session")

@@ -6,17 +6,17 @@ import cv2
 import numpy as np
 import pytest
 
-from ibik_pin.cameras import (
+from ibik_pin.exceptions import FileFormatError, InputError, UnknownNameError
+from ibik_pin.io.calibration import read_calibration, write_calibration
+from ibik_pin.vision.camera import (
     OrthographicCamera,
     PinholeCamera,
     look_at_camera,
-    read_calibration,
     select_cameras,
-    write_calibration,
 )
-from ibik_pin.exceptions import FileFormatError, InputError, UnknownNameError
+from tests.paths import SHARED_DATA
 
-DEMO_CALIBRATION = Path("/work/shared/data/pose2sim_demo/Calib_qualisys_converted.toml")
+DEMO_CALIBRATION = SHARED_DATA / "pose2sim_demo" / "Calib_qualisys_converted.toml"
 
 CAMERA_SECTION = """\
 [cam_01]

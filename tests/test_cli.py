@@ -13,11 +13,11 @@ import cv2
 import numpy as np
 import pytest
 
-from ibik_pin.cameras import read_calibration, write_calibration
 from ibik_pin.cli import main
 from ibik_pin.demo import ESTIMATED, prepare_demo_inputs
 from ibik_pin.evaluation import mean_joint_errors_mm
 from ibik_pin.exceptions import IbikWarning
+from ibik_pin.io.calibration import read_calibration, write_calibration
 from ibik_pin.io.mot import read_mot
 from ibik_pin.io.trc import read_trc, write_trc
 
@@ -237,7 +237,7 @@ def test_the_console_script_is_installed_and_reports_errors_in_one_line(tmp_path
 
 def write_videos(dataset, folder: Path, width: int) -> None:
     """One mp4 per camera: the masks drawn as a person on a textured still background."""
-    from ibik_pin.images import list_mask_files, read_mask
+    from ibik_pin.io.masks import list_mask_files, read_mask
 
     folder.mkdir()
     rng = np.random.default_rng(0)

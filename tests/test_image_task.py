@@ -4,13 +4,13 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from ibik_pin.cameras import look_at_camera
 from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
-from ibik_pin.images import SupportImage, support_from_mask
-from ibik_pin.render import render_capsules
+from ibik_pin.synthetic.planar import make_scene, render_chain
 from ibik_pin.tasks import ImageTask, View
-from ibik_pin.virtual import make_scene, render_chain
+from ibik_pin.vision.camera import look_at_camera
+from ibik_pin.vision.render import render_capsules
+from ibik_pin.vision.support import SupportImage, support_from_mask
 from tests.conftest import random_human_configuration
 
 

@@ -9,18 +9,13 @@ import numpy as np
 import pytest
 
 from ibik_pin.exceptions import EmptySilhouetteWarning, FileFormatError, InputError
-from ibik_pin.images import (
-    SupportImage,
-    TemporalMajority,
-    VideoReader,
-    list_mask_files,
-    obstacle_support,
-    read_mask,
-    silhouettes_from_video,
-    support_from_mask,
-)
+from ibik_pin.io.masks import list_mask_files, read_mask
+from ibik_pin.io.video import VideoReader
+from ibik_pin.vision.segmentation import TemporalMajority, silhouettes_from_video
+from ibik_pin.vision.support import SupportImage, obstacle_support, support_from_mask
+from tests.paths import SHARED_DATA
 
-DEMO_VIDEO = Path("/work/shared/data/pose2sim_demo/videos/cam01.mp4")
+DEMO_VIDEO = SHARED_DATA / "pose2sim_demo" / "videos" / "cam01.mp4"
 VIDEO_SIZE = (160, 120)  # (w, h) [px]
 VIDEO_FRAMES = 30
 DISC_RADIUS = 15  # [px]

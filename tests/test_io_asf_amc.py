@@ -1,16 +1,15 @@
 """Tests of ibik_pin.io.asf_amc: CMU skeletons and walks, conventions, malformed files."""
 
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from ibik_pin.exceptions import FileFormatError, InputError
 from ibik_pin.io.asf_amc import read_asf_amc
+from tests.paths import SHARED_DATA, TEST_DATA
 
-TEST_DATA = Path(__file__).resolve().parent / "data"
-SHARED_CMU = Path(__file__).resolve().parents[2] / "shared" / "data" / "cmu"
+SHARED_CMU = SHARED_DATA / "cmu"
 needs_shared_cmu = pytest.mark.skipif(
     not SHARED_CMU.is_dir(), reason="the shared CMU data is not beside the repository"
 )

@@ -3,16 +3,20 @@ kinematics, real files, malformed files."""
 
 import itertools
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from ibik_pin.exceptions import FileFormatError, IbikWarning, InputError, UnknownNameError
+from ibik_pin.exceptions import (
+    FileFormatError,
+    IbikWarning,
+    InputError,
+    UnknownNameError,
+)
 from ibik_pin.io.bvh import CMU_BVH_SCALE, read_bvh, write_bvh
+from tests.paths import SHARED_DATA, TEST_DATA
 
-TEST_DATA = Path(__file__).resolve().parent / "data"
-SHARED_BVH = Path(__file__).resolve().parents[2] / "shared" / "data" / "bvh"
+SHARED_BVH = SHARED_DATA / "bvh"
 needs_shared_bvh = pytest.mark.skipif(
     not SHARED_BVH.is_dir(), reason="the shared BVH data is not beside the repository"
 )

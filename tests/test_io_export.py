@@ -7,6 +7,7 @@ import pytest
 
 from ibik_pin.exceptions import InputError
 from ibik_pin.io.bvh import read_bvh
+from ibik_pin.io.euler import euler_to_matrices
 from ibik_pin.io.export import (
     bvh_joint_groups,
     q_column_names,
@@ -15,7 +16,6 @@ from ibik_pin.io.export import (
     write_q_csv,
 )
 from ibik_pin.io.mot import read_mot
-from ibik_pin.io.motion import euler_to_matrices
 from ibik_pin.model import load_arm
 from tests.conftest import random_human_configuration
 

@@ -6,11 +6,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import ibik_pin.io.motion
+import ibik_pin.io.files
 from ibik_pin.exceptions import FileFormatError, IbikWarning, InputError
 from ibik_pin.io.trc import TrcData, read_trc, write_trc
+from tests.paths import SHARED_DATA
 
-SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 POSE2SIM_TRC_FILES = sorted((SHARED_DATA / "pose2sim_demo" / "ref3d").glob("*.trc"))
 needs_pose2sim_files = pytest.mark.skipif(
     not POSE2SIM_TRC_FILES, reason="the shared Pose2Sim demo data is not beside the repository"
@@ -226,7 +226,7 @@ def test_a_failed_write_keeps_the_previous_file_and_leaves_no_temporary_file(tmp
     def failing_replace(source, destination):
         raise OSError("disk full")
 
-    monkeypatch.setattr(ibik_pin.io.motion.os, "replace", failing_replace)
+    monkeypatch.setattr(ibik_pin.io.files.os, "replace", failing_replace)
     with pytest.raises(InputError, match="cannot write: disk full"):
         write_trc(path, data)
 

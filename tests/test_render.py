@@ -3,9 +3,10 @@
 import numpy as np
 import pytest
 
-from ibik_pin.cameras import OrthographicCamera, look_at_camera
 from ibik_pin.exceptions import InputError
-from ibik_pin.render import draw_skeleton, overlay_mask, render_capsules
+from ibik_pin.vision.camera import OrthographicCamera, look_at_camera
+from ibik_pin.vision.render import render_capsules
+from ibik_pin.viz.drawing import draw_skeleton, overlay_mask
 
 FOCAL_PX = 500.0
 DEPTH_M = 3.0

@@ -11,7 +11,9 @@ import numpy as np
 import pytest
 
 from ibik_pin.exceptions import FileFormatError, InputError
-from ibik_pin.report import plot_series, write_html_replay, write_overlay_video
+from ibik_pin.viz.overlay import write_overlay_video
+from ibik_pin.viz.plots import plot_series
+from ibik_pin.viz.replay import write_html_replay
 
 VIDEO_SIZE = (160, 120)  # (width, height) [px]
 FRAME_RATE = 10.0  # [Hz]

@@ -1,5 +1,4 @@
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -7,7 +6,7 @@ import pytest
 from ibik_pin.exceptions import IbikWarning, InputError, UnknownNameError
 from ibik_pin.io.asf_amc import read_asf_amc
 from ibik_pin.model import load_arm
-from ibik_pin.scaling import (
+from ibik_pin.subject.scaling import (
     HUMAN_NEUTRAL_STATURE_M,
     LENGTH_KEYPOINTS,
     keypoint_lengths,
@@ -16,9 +15,9 @@ from ibik_pin.scaling import (
     scale_human,
     segment_lengths_from_keypoints,
 )
-from ibik_pin.synthetic import keypoints_from_motion
+from ibik_pin.synthetic.mocap import keypoints_from_motion
+from tests.paths import TEST_DATA
 
-TEST_DATA = Path(__file__).resolve().parent / "data"
 MILLIMETRE = 1e-3
 
 

@@ -1,34 +1,32 @@
 import json
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import pytest
 
-from ibik_pin.cameras import POSE2SIM_TRC_TO_WORLD, cameras_in_frame, read_calibration
 from ibik_pin.exceptions import IbikWarning, InputError, UnknownNameError
-from ibik_pin.images import list_mask_files, read_mask
 from ibik_pin.io.asf_amc import read_asf_amc
 from ibik_pin.io.bvh import CMU_BVH_SCALE, read_bvh
+from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, read_calibration
+from ibik_pin.io.masks import list_mask_files, read_mask
 from ibik_pin.io.trc import read_trc
 from ibik_pin.limits import JointLimits
 from ibik_pin.model import HUMAN_END_EFFECTORS, load_human
-from ibik_pin.scaling import scale_human, segment_lengths_from_keypoints
-from ibik_pin.synthetic import (
-    SilhouetteDefects,
-    apply_defects,
+from ibik_pin.subject.scaling import scale_human, segment_lengths_from_keypoints
+from ibik_pin.synthetic.dataset import write_dataset
+from ibik_pin.synthetic.defects import SilhouetteDefects, apply_defects
+from ibik_pin.synthetic.mocap import (
     facing_directions,
-    humaneva_rig,
     keypoints_from_motion,
     pose_model_to_keypoints,
-    render_limb_masks,
-    render_silhouettes,
-    write_dataset,
 )
+from ibik_pin.synthetic.rig import humaneva_rig
+from ibik_pin.synthetic.silhouettes import render_limb_masks, render_silhouettes
+from ibik_pin.vision.camera import cameras_in_frame
+from tests.paths import SHARED_DATA, TEST_DATA
 
-TEST_DATA = Path(__file__).resolve().parent / "data"
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
+SHARED = SHARED_DATA
 needs_shared_data = pytest.mark.skipif(not SHARED.is_dir(), reason="the shared data is not beside the repository")
 
 

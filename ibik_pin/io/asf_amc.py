@@ -24,7 +24,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ibik_pin.exceptions import FileFormatError, InputError
-from ibik_pin.io.motion import SkeletonMotion, euler_to_matrices, is_number, read_text
+from ibik_pin.io.euler import euler_to_matrices
+from ibik_pin.io.files import is_number, read_text
+from ibik_pin.io.skeleton import SkeletonMotion
 
 _ROTATION_DOFS = ("rx", "ry", "rz")
 _TRANSLATION_DOFS = ("tx", "ty", "tz")

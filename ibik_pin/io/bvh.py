@@ -19,15 +19,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from ibik_pin.exceptions import FileFormatError, InputError
-from ibik_pin.io.motion import (
-    SkeletonMotion,
+from ibik_pin.io.euler import euler_to_matrices, matrices_to_euler
+from ibik_pin.io.files import (
     check_declared_count,
-    euler_to_matrices,
     is_number,
-    matrices_to_euler,
     read_text,
     write_text_atomically,
 )
+from ibik_pin.io.skeleton import SkeletonMotion
 
 #: The channel names a BVH file may hold.
 CHANNEL_NAMES = (

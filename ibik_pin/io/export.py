@@ -17,8 +17,9 @@ import pinocchio as pin
 
 from ibik_pin.exceptions import InputError
 from ibik_pin.io.bvh import write_bvh
+from ibik_pin.io.euler import matrices_to_euler
+from ibik_pin.io.files import write_text_atomically
 from ibik_pin.io.mot import write_mot
-from ibik_pin.io.motion import matrices_to_euler, write_text_atomically
 from ibik_pin.model import BodyModel
 
 __all__ = [

@@ -23,7 +23,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ibik_pin.exceptions import FileFormatError, InputError
-from ibik_pin.io.motion import check_declared_count, is_number, read_text, write_text_atomically
+from ibik_pin.io.files import (
+    check_declared_count,
+    is_number,
+    read_text,
+    write_text_atomically,
+)
 
 
 @dataclass

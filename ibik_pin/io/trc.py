@@ -23,7 +23,12 @@ from pathlib import Path
 import numpy as np
 
 from ibik_pin.exceptions import FileFormatError, InputError
-from ibik_pin.io.motion import check_declared_count, is_number, read_text, write_text_atomically
+from ibik_pin.io.files import (
+    check_declared_count,
+    is_number,
+    read_text,
+    write_text_atomically,
+)
 
 #: Metres per unit for the units a TRC file may declare.
 METRES_PER_UNIT = {"m": 1.0, "cm": 0.01, "mm": 0.001}

@@ -6,11 +6,21 @@ changes.
 
 from __future__ import annotations
 
-from ..exceptions import UnknownNameError
-from ..limits import JointLimits
-from .base import DEFAULT_DAMPING, LevelReport, SolveResult, Solver, StepResult
-from .hqp import HierarchicalQPSolver
-from .projection import DampedLeastSquaresSolver, LiegeoisSolver, PriorityStackSolver
+from ibik_pin.exceptions import UnknownNameError
+from ibik_pin.limits import JointLimits
+from ibik_pin.solvers.base import (
+    DEFAULT_DAMPING,
+    LevelReport,
+    Solver,
+    SolveResult,
+    StepResult,
+)
+from ibik_pin.solvers.hqp import HierarchicalQPSolver
+from ibik_pin.solvers.projection import (
+    DampedLeastSquaresSolver,
+    LiegeoisSolver,
+    PriorityStackSolver,
+)
 
 SOLVERS = {
     "ik": DampedLeastSquaresSolver,

@@ -14,10 +14,10 @@ from typing import Sequence
 
 import numpy as np
 
-from ..configuration import Configuration
-from ..exceptions import InputError
-from ..limits import JointLimits
-from ..tasks.base import GradientTask, Task
+from ibik_pin.configuration import Configuration
+from ibik_pin.exceptions import InputError
+from ibik_pin.limits import JointLimits
+from ibik_pin.tasks.base import GradientTask, Task
 
 Levels = Sequence[Sequence[Task | GradientTask]]
 

@@ -22,11 +22,19 @@ from __future__ import annotations
 import numpy as np
 import proxsuite
 
-from ..configuration import Configuration
-from ..exceptions import InputError
-from ..limits import JointLimits
-from .base import DEFAULT_DAMPING, GradientLevel, Levels, Solver, StepResult, build_levels, report_levels
-from .nullspace import unconstrained_level_step, unit_reduced_direction
+from ibik_pin.configuration import Configuration
+from ibik_pin.exceptions import InputError
+from ibik_pin.limits import JointLimits
+from ibik_pin.solvers.base import (
+    DEFAULT_DAMPING,
+    GradientLevel,
+    Levels,
+    Solver,
+    StepResult,
+    build_levels,
+    report_levels,
+)
+from ibik_pin.solvers.nullspace import unconstrained_level_step, unit_reduced_direction
 
 UNBOUNDED = 1e20  # proxsuite's stand-in for an infinite bound
 _SOLVED = {

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import GradientLevel
+from ibik_pin.solvers.base import GradientLevel
 
 # Singular values below RANK_TOLERANCE * max(1, sigma_max) count as zero for the null space: small
 # enough that lower levels leak < 1e-8 into higher ones, while damping keeps the steps bounded.

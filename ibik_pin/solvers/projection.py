@@ -18,12 +18,20 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..configuration import Configuration
-from ..exceptions import InputError
-from ..limits import JointLimits
-from ..tasks.base import GradientTask
-from .nullspace import unconstrained_level_step
-from .base import DEFAULT_DAMPING, Levels, Solver, StepResult, build_levels, report_levels
+from ibik_pin.configuration import Configuration
+from ibik_pin.exceptions import InputError
+from ibik_pin.limits import JointLimits
+from ibik_pin.solvers.base import (
+    DEFAULT_DAMPING,
+    Levels,
+    Solver,
+    StepResult,
+    build_levels,
+    report_levels,
+)
+from ibik_pin.solvers.nullspace import unconstrained_level_step
+from ibik_pin.tasks.base import GradientTask
+
 
 class PriorityStackSolver(Solver):
     """Strict priority stack by recursive null-space projection with damped pseudo-inverses.

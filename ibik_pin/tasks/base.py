@@ -15,8 +15,8 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 
-from ..configuration import Configuration
-from ..exceptions import InputError
+from ibik_pin.configuration import Configuration
+from ibik_pin.exceptions import InputError
 
 
 def _check_positive(name: str, value: float) -> float:

@@ -20,10 +20,10 @@ from typing import Sequence
 
 import numpy as np
 
-from ..configuration import Configuration
-from ..exceptions import EmptySilhouetteWarning, InputError
-from ..model import BodyModel
-from .base import GradientTask
+from ibik_pin.configuration import Configuration
+from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
+from ibik_pin.model import BodyModel
+from ibik_pin.tasks.base import GradientTask
 
 
 @dataclass

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from ..configuration import Configuration
-from ..exceptions import InputError
-from ..model import frame_id
-from .base import Task
+from ibik_pin.configuration import Configuration
+from ibik_pin.exceptions import InputError
+from ibik_pin.model import frame_id
+from ibik_pin.tasks.base import Task
 
 
 class FramePositionTask(Task):

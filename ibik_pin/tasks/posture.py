@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from ..configuration import Configuration
-from ..exceptions import InputError
-from .base import Task
+from ibik_pin.configuration import Configuration
+from ibik_pin.exceptions import InputError
+from ibik_pin.tasks.base import Task
 
 
 class PostureTask(Task):

@@ -1,4 +1,4 @@
-"""Cameras: projection of world points to pixels, its Jacobian, and calibration I/O.
+"""Cameras: projection of world points to pixels and its Jacobian.
 
 Conventions (OpenCV's):
 - World to camera: ``X_cam = R X_world + t`` with ``R`` (3, 3) and ``t`` (3,) [m].
@@ -9,52 +9,29 @@ Conventions (OpenCV's):
 Two camera kinds share the same interface (``project``, ``project_with_jacobian``,
 ``pixel_radius``): :class:`PinholeCamera`, the calibrated OpenCV model with distortion, and
 :class:`OrthographicCamera`, for planar virtual experiments.
-
-Calibration files follow Pose2Sim's TOML format: one section per camera with the keys ``name``,
-``size`` = [width, height], ``matrix`` (3 x 3), ``distortions`` (k1, k2, p1, p2), ``rotation``
-(Rodrigues vector, world to camera), ``translation`` [m] and ``fisheye``.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
-import os
-import re
 import sys
 from dataclasses import dataclass
-from pathlib import Path
-from typing import NamedTuple, Sequence, Union
+from typing import NamedTuple, Sequence
 
 import cv2
 import numpy as np
 
-from ibik_pin.exceptions import FileFormatError, InputError, UnknownNameError
-from ibik_pin.io.motion import write_text_atomically
+from ibik_pin.exceptions import InputError, UnknownNameError
 
 if sys.version_info >= (3, 11):
-    import tomllib
+    pass
 else:  # pragma: no cover - exercised on Python 3.10 only
-    import tomli as tomllib
+    pass
 
-__all__ = [
-    "Camera",
-    "OrthographicCamera",
-    "PinholeCamera",
-    "Projection",
-    "look_at_camera",
-    "read_calibration",
-    "select_cameras",
-    "write_calibration",
-]
-
-PathLike = Union[str, os.PathLike]
 
 _ROTATION_TOLERANCE = 1e-6
-# Pose2Sim sections that do not describe a camera.
-_NON_CAMERA_SECTIONS = frozenset({"metadata", "capture_volume", "charuco", "checkerboard"})
-_BARE_TOML_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
+
 
 
 class Projection(NamedTuple):
@@ -72,10 +49,12 @@ class Projection(NamedTuple):
     depth: np.ndarray
 
 
+
 def _read_only(array: np.ndarray) -> np.ndarray:
     array = np.array(array, dtype=np.float64, copy=True)
     array.setflags(write=False)
     return array
+
 
 
 def _as_array(value, shape: tuple[int, ...] | Sequence[tuple[int, ...]], name: str) -> np.ndarray:
@@ -93,12 +72,14 @@ def _as_array(value, shape: tuple[int, ...] | Sequence[tuple[int, ...]], name: s
     return array
 
 
+
 def _as_points(points_world, name: str = "points_world") -> np.ndarray:
     """(N, 3) float64 view of the points; non-finite values propagate to the result."""
     points = np.asarray(points_world, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] != 3:
         raise InputError(f"{name}: expected an array of shape (N, 3) [m], found shape {points.shape}")
     return points
+
 
 
 def _as_size(size, name: str = "size") -> tuple[int, int]:
@@ -109,6 +90,7 @@ def _as_size(size, name: str = "size") -> tuple[int, int]:
     if len(values) != 2 or not all(math.isfinite(s) and s >= 1 and s == int(s) for s in values):
         raise InputError(f"{name}: expected (width, height), two positive integers [px], found {size!r}")
     return int(values[0]), int(values[1])
+
 
 
 def _as_rotation(rotation, name: str = "rotation") -> np.ndarray:
@@ -122,10 +104,12 @@ def _as_rotation(rotation, name: str = "rotation") -> np.ndarray:
     return R
 
 
+
 def _rotation_from_rodrigues(rvec, name: str = "rvec") -> np.ndarray:
     vector = _as_array(rvec, [(3,), (3, 1), (1, 3)], name).reshape(3, 1)
     R, _ = cv2.Rodrigues(vector)
     return R
+
 
 
 class Camera:
@@ -224,6 +208,7 @@ class Camera:
         if radii.shape != (count,):
             raise InputError(f"radii: expected shape ({count},) [m] or a scalar, found shape {radii.shape}")
         return radii
+
 
 
 @dataclass(frozen=True, eq=False)
@@ -359,6 +344,7 @@ class PinholeCamera(Camera):
             return np.where(depth > 0.0, self.focal_px * radii / depth, np.nan)
 
 
+
 @dataclass(frozen=True, eq=False)
 class OrthographicCamera(Camera):
     """An orthographic camera: ``pixels = scale * X_cam[:2] + principal_point``.
@@ -410,6 +396,7 @@ class OrthographicCamera(Camera):
         return self.scale * self._radii(radii, count)
 
 
+
 def look_at_camera(
     name: str,
     size: tuple[int, int],
@@ -453,6 +440,7 @@ def look_at_camera(
     return PinholeCamera(name, (width, height), intrinsics, np.zeros(5), rotation, -rotation @ eye)
 
 
+
 def select_cameras(cameras: Sequence[Camera], names: Sequence[str]) -> list[Camera]:
     """The cameras with the given names, in the order of ``names``.
 
@@ -473,162 +461,6 @@ def select_cameras(cameras: Sequence[Camera], names: Sequence[str]) -> list[Came
         raise InputError(f"names: expected each camera at most once, found {repeated} more than once")
     return [by_name[name] for name in names]
 
-
-def read_calibration(path: PathLike) -> list[PinholeCamera]:
-    """Cameras from a Pose2Sim calibration TOML file, in file order.
-
-    Every top-level table except Pose2Sim's non-camera sections (``metadata``,
-    ``capture_volume``, ``charuco``, ``checkerboard``) is a camera with the keys ``name``,
-    ``size`` [w, h], ``matrix`` (3 x 3), ``distortions`` (4 values k1, k2, p1, p2, or 5 with
-    k3), ``rotation`` (Rodrigues, world to camera), ``translation`` [m] and optionally
-    ``fisheye`` (absent means false).
-
-    Args:
-        path: the TOML file.
-
-    Returns:
-        The cameras.
-
-    Raises:
-        FileFormatError: the file cannot be read or parsed, a key is missing, a value has the
-            wrong shape or is not finite, ``fisheye = true`` (not supported), two cameras share
-            a name, or no camera section; the message names the file, section and key.
-    """
-    path = Path(path)
-    try:
-        with open(path, "rb") as stream:
-            document = tomllib.load(stream)
-    except OSError as error:
-        raise FileFormatError(f"calibration file '{path}': cannot be read ({error.strerror or error})") from None
-    except tomllib.TOMLDecodeError as error:
-        raise FileFormatError(
-            f"calibration file '{path}': expected valid TOML, found a syntax error: {error}"
-        ) from None
-
-    cameras: list[PinholeCamera] = []
-    for section, table in document.items():
-        if section in _NON_CAMERA_SECTIONS or not isinstance(table, dict):
-            continue
-        cameras.append(_camera_from_section(path, section, table))
-    if not cameras:
-        raise FileFormatError(
-            f"calibration file '{path}': expected at least one camera section, found sections {list(document)}"
-        )
-    names = [camera.name for camera in cameras]
-    repeated = sorted({name for name in names if names.count(name) > 1})
-    if repeated:
-        raise FileFormatError(
-            f"calibration file '{path}': key 'name': expected unique camera names, found {repeated} repeated"
-        )
-    return cameras
-
-
-def _camera_from_section(path: Path, section: str, table: dict) -> PinholeCamera:
-    where = f"calibration file '{path}', section [{section}]"
-
-    def value(key: str, shapes, description: str) -> np.ndarray:
-        if key not in table:
-            raise FileFormatError(f"{where}: missing key '{key}' ({description}); found keys {sorted(table)}")
-        try:
-            return _as_array(table[key], shapes, key)
-        except InputError as error:
-            raise FileFormatError(f"{where}, key '{key}' ({description}): {_detail(error)}") from None
-
-    if "name" not in table:
-        raise FileFormatError(f"{where}: missing key 'name' (camera name); found keys {sorted(table)}")
-    name = table["name"]
-    if not isinstance(name, str) or not name:
-        raise FileFormatError(f"{where}, key 'name': expected a non-empty string, found {name!r}")
-    fisheye = table.get("fisheye", False)
-    if not isinstance(fisheye, bool):
-        raise FileFormatError(f"{where}, key 'fisheye': expected true or false, found {fisheye!r}")
-    if fisheye:
-        raise FileFormatError(
-            f"{where}, key 'fisheye': fisheye = true is not supported; expected false "
-            "(OpenCV pinhole model with k1, k2, p1, p2[, k3] distortion)"
-        )
-    size = value("size", (2,), "[width, height] in pixels")
-    intrinsics = value("matrix", (3, 3), "3 x 3 intrinsic matrix")
-    distortion = value("distortions", [(4,), (5,)], "k1, k2, p1, p2[, k3]")
-    rvec = value("rotation", (3,), "Rodrigues vector, world to camera")
-    tvec = value("translation", (3,), "world to camera [m]")
-    try:
-        size = _as_size(size.tolist())
-    except InputError as error:
-        raise FileFormatError(f"{where}, key 'size': {_detail(error)}") from None
-    try:
-        return PinholeCamera.from_rodrigues(name, size, intrinsics, distortion, rvec, tvec)
-    except InputError as error:
-        parameter = str(error).split(":")[0]
-        key = {"intrinsics": "matrix", "distortion": "distortions", "rvec": "rotation"}.get(parameter, parameter)
-        raise FileFormatError(f"{where}, key '{key}': {_detail(error)}") from None
-
-
-def _detail(error: InputError) -> str:
-    """The message of an InputError without its leading 'parameter: '."""
-    message = str(error)
-    return message.split(": ", 1)[1] if ": " in message else message
-
-
-def _toml_key(name: str) -> str:
-    return name if _BARE_TOML_KEY.match(name) else json.dumps(name, ensure_ascii=False)
-
-
-def _toml_array(values: np.ndarray) -> str:
-    if values.ndim == 1:
-        return "[ " + ", ".join(repr(float(v)) for v in values) + "]"
-    return "[ " + ", ".join(_toml_array(row) for row in values) + "]"
-
-
-def write_calibration(path: PathLike, cameras: Sequence[PinholeCamera]) -> None:
-    """Write cameras to a Pose2Sim calibration TOML file (atomically: temporary file, then rename).
-
-    Floats are written with full precision, so :func:`read_calibration` gives the same cameras
-    back (rotation up to the Rodrigues round trip, ~1e-15).
-
-    Args:
-        path: the TOML file to write.
-        cameras: pinhole cameras with distinct names.
-
-    Raises:
-        InputError: a camera is not a :class:`PinholeCamera`, or names repeat or are reserved.
-        OSError: the file cannot be written.
-    """
-    path = Path(path)
-    lines: list[str] = []
-    seen: set[str] = set()
-    for index, camera in enumerate(cameras):
-        if not isinstance(camera, PinholeCamera):
-            raise InputError(
-                f"cameras[{index}]: expected a PinholeCamera (the TOML format has no other kind), "
-                f"found {type(camera).__name__}"
-            )
-        if camera.name in seen or camera.name in _NON_CAMERA_SECTIONS:
-            raise InputError(
-                f"cameras[{index}].name: expected a unique name other than {sorted(_NON_CAMERA_SECTIONS)}, "
-                f"found {camera.name!r}"
-            )
-        seen.add(camera.name)
-        lines += [
-            f"[{_toml_key(camera.name)}]",
-            f"name = {json.dumps(camera.name, ensure_ascii=False)}",
-            f"size = {_toml_array(np.asarray(camera.size, dtype=np.float64))}",
-            f"matrix = {_toml_array(camera.intrinsics)}",
-            f"distortions = {_toml_array(camera.distortion)}",
-            f"rotation = {_toml_array(camera.rvec)}",
-            f"translation = {_toml_array(camera.translation)}",
-            "fisheye = false",
-            "",
-        ]
-    if not seen:
-        raise InputError("cameras: expected at least one camera, found none")
-    lines += ["[metadata]", "adjusted = false", "error = 0.0", ""]
-    write_text_atomically(path, "\n".join(lines))
-
-
-# Pose2Sim writes TRC files Y-up while its calibration's world is Z-up: a TRC point (x, y, z) is the
-# calibration-world point (z, x, y) (see ../shared/data/README.md, pose2sim_demo).
-POSE2SIM_TRC_TO_WORLD = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
 
 def cameras_in_frame(cameras: Sequence[Camera], frame_to_world: np.ndarray) -> list[Camera]:

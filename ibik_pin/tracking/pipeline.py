@@ -18,22 +18,25 @@ from typing import Sequence
 
 import numpy as np
 
-from .cameras import POSE2SIM_TRC_TO_WORLD, cameras_in_frame, read_calibration, select_cameras
-from .exceptions import FileFormatError, IbikWarning, InputError
-from .images import (
-    IMAGE_SUFFIXES,
-    VideoReader,
-    list_mask_files,
-    read_mask,
-    silhouettes_from_video,
+from ibik_pin.exceptions import FileFormatError, IbikWarning, InputError
+from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, read_calibration
+from ibik_pin.io.export import write_model_bvh, write_model_mot, write_q_csv
+from ibik_pin.io.masks import IMAGE_SUFFIXES, list_mask_files, read_mask
+from ibik_pin.io.trc import TrcData, read_trc, write_trc
+from ibik_pin.io.video import VideoReader
+from ibik_pin.model import BodyModel, load_human
+from ibik_pin.progress import ProgressBar
+from ibik_pin.subject.scaling import (
+    scale_from_stature,
+    scale_human,
+    segment_lengths_from_keypoints,
 )
-from .io.export import write_model_bvh, write_model_mot, write_q_csv
-from .io.trc import TrcData, read_trc, write_trc
-from .model import BodyModel, load_human
-from .progress import ProgressBar
-from .report import plot_series, write_html_replay, write_overlay_video
-from .scaling import scale_from_stature, scale_human, segment_lengths_from_keypoints
-from .tracking import Tracker, TrackingResult, TrackingSettings
+from ibik_pin.tracking.tracker import Tracker, TrackingResult, TrackingSettings
+from ibik_pin.vision.camera import cameras_in_frame, select_cameras
+from ibik_pin.vision.segmentation import silhouettes_from_video
+from ibik_pin.viz.overlay import write_overlay_video
+from ibik_pin.viz.plots import plot_series
+from ibik_pin.viz.replay import write_html_replay
 
 VIDEO_SUFFIXES = {".mp4", ".avi", ".mov", ".mkv", ".m4v"}
 # Encoders round frame sizes to macroblocks of 16 px: a video up to 15 px off its calibration's

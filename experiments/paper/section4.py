@@ -25,29 +25,32 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from .configuration import Configuration
-from .exceptions import EmptySilhouetteWarning
-from .images import TemporalMajority
-from .io.asf_amc import read_asf_amc
-from .io.bvh import CMU_BVH_SCALE, read_bvh
-from .io.motion import SkeletonMotion
-from .limits import JointLimits
-from .model import BodyModel, load_arm, load_human, load_leg, set_segment_length
-from .scaling import scale_human, segment_lengths_from_keypoints
-from .solvers import make_solver
-from .synthetic import (
-    SilhouetteDefects,
-    apply_defects,
+from ibik_pin.configuration import Configuration
+from ibik_pin.exceptions import EmptySilhouetteWarning
+from ibik_pin.io.asf_amc import read_asf_amc
+from ibik_pin.io.bvh import CMU_BVH_SCALE, read_bvh
+from ibik_pin.io.skeleton import SkeletonMotion
+from ibik_pin.limits import JointLimits
+from ibik_pin.model import BodyModel, load_arm, load_human, load_leg, set_segment_length
+from ibik_pin.solvers import make_solver
+from ibik_pin.subject.scaling import scale_human, segment_lengths_from_keypoints
+from ibik_pin.synthetic.defects import SilhouetteDefects, apply_defects
+from ibik_pin.synthetic.mocap import (
     facing_directions,
-    humaneva_rig,
     keypoints_from_motion,
     pose_model_to_keypoints,
-    render_limb_masks,
-    render_silhouettes,
 )
-from .tasks import FramePositionTask, ImageTask
-from .tracking import Tracker, TrackingSettings, make_views, solve_first_frame, support_caps
-
+from ibik_pin.synthetic.rig import humaneva_rig
+from ibik_pin.synthetic.silhouettes import render_limb_masks, render_silhouettes
+from ibik_pin.tasks import FramePositionTask, ImageTask
+from ibik_pin.tracking.tracker import (
+    Tracker,
+    TrackingSettings,
+    make_views,
+    solve_first_frame,
+    support_caps,
+)
+from ibik_pin.vision.segmentation import TemporalMajority
 
 # Moderate segmentation defects at HumanEva's 640 x 480: a mask 1 px tight or 2 px loose, a small
 # hole, two shadow or clutter blobs, a forearm or shank lost in 5% of the masks. (Holes of 3 px

@@ -9,13 +9,10 @@ default scheme (the hierarchical QP).
 from __future__ import annotations
 
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
-
-from ibik_pin.exceptions import IbikWarning
-from ibik_pin.paper import (
+from paper.section4 import (
     DEFECT_MASK_FILTER_RADIUS,
     DEFECT_TARGET_NOISE_MM,
     DEFECTS,
@@ -28,7 +25,10 @@ from ibik_pin.paper import (
     temporally_filtered,
 )
 
-DATA = Path(__file__).resolve().parent / "data"
+from ibik_pin.exceptions import IbikWarning
+from tests.paths import TEST_DATA
+
+DATA = TEST_DATA
 
 
 @pytest.fixture(scope="module")

@@ -1,10 +1,4 @@
-"""The paper's virtual experiments (Section 3, Figs. 6-8): the planar chain seen by one camera.
-
-A `PlanarScene` holds the 4-segment chain, an orthographic camera looking at its plane, the
-objective configuration's silhouette (rendered by the project's renderer) and the support image the
-criterion reads; optionally a square object drawn into the image that the chain must avoid
-(support built so that the object repels). `run_planar` drives the chain's end effector to the
-objective's with a given solver, with or without the image level, and records every iteration.
+"""The paper's virtual experiments (Figs. 6-8) run on the planar chain.
 """
 
 from __future__ import annotations
@@ -14,101 +8,11 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .cameras import OrthographicCamera
-from .configuration import Configuration
-from .images import SupportImage, obstacle_support, support_from_mask
-from .model import BodyModel, load_planar_chain
-from .render import render_capsules
-from .solvers import DampedLeastSquaresSolver, Solver, make_solver
-from .tasks import FramePositionTask, ImageTask, View
-
-IMAGE_SIZE = (400, 400)  # [px]
-PIXELS_PER_METRE = 150.0
-CHAIN_LENGTH = 1.0  # [m], 4 segments of 0.25 m
-
-
-def planar_camera() -> OrthographicCamera:
-    """Looks down the world Z axis at the chain's plane; world +Y is image up."""
-    return OrthographicCamera(
-        name="virtual",
-        size=IMAGE_SIZE,
-        rotation=np.diag([1.0, -1.0, -1.0]),
-        translation=np.array([0.0, 0.0, 5.0]),
-        scale=PIXELS_PER_METRE,
-        principal_point=np.array([IMAGE_SIZE[0] / 2, IMAGE_SIZE[1] / 2]),
-    )
-
-
-@dataclass
-class PlanarScene:
-    """The chain, its camera, the objective and the support image the criterion reads.
-
-    Attributes:
-        body: the planar chain.
-        camera: the orthographic camera.
-        objective_q: the configuration whose silhouette is the image, shape (4,) [rad].
-        silhouette: the objective's rendered silhouette (H, W), or None (fig8: no silhouette).
-        object_mask: the square object (H, W), or None.
-        support: the support image.
-    """
-
-    body: BodyModel
-    camera: OrthographicCamera
-    objective_q: np.ndarray
-    silhouette: np.ndarray | None
-    object_mask: np.ndarray | None
-    support: SupportImage
-
-    def keypoint_positions(self, q: np.ndarray) -> np.ndarray:
-        """World positions [m] of joint_1..joint_4 and the end effector, shape (5, 3)."""
-        configuration = Configuration(self.body.model, q)
-        return configuration.frame_positions(self.body.frame_ids(list(self.body.keypoints)))
-
-
-def render_chain(body: BodyModel, camera, q: np.ndarray) -> np.ndarray:
-    """Silhouette (H, W) bool of the chain at q, capsules of the body's segment radii."""
-    configuration = Configuration(body.model, q)
-    ends = configuration.frame_positions(body.segment_frame_ids.reshape(-1)).reshape(-1, 2, 3)
-    return render_capsules(camera, ends[:, 0], ends[:, 1], body.segment_radii)
-
-
-def square_mask(center_world: np.ndarray, half_side: float, camera) -> np.ndarray:
-    """A filled square (H, W) bool centred on a world point of the plane, half side [m]."""
-    width, height = camera.size
-    corners = camera.project(
-        np.array([center_world + [sx * half_side, sy * half_side, 0.0] for sx in (-1, 1) for sy in (-1, 1)])
-    )
-    u0, v0 = np.floor(corners.min(axis=0)).astype(int)
-    u1, v1 = np.ceil(corners.max(axis=0)).astype(int)
-    mask = np.zeros((height, width), dtype=bool)
-    mask[max(v0, 0) : max(v1, 0), max(u0, 0) : max(u1, 0)] = True
-    return mask
-
-
-def make_scene(
-    objective_q: np.ndarray,
-    with_silhouette: bool = True,
-    obstacle_center: np.ndarray | None = None,
-    obstacle_half_side: float = 0.08,
-    obstacle_influence_px: float = 25.0,
-    inside_cap_px: float = 3.0,
-) -> PlanarScene:
-    """Build a planar scene; the support is the silhouette's signed distance plus the obstacle's
-    repulsion (either may be absent)."""
-    body = load_planar_chain()
-    camera = planar_camera()
-    objective_q = np.asarray(objective_q, dtype=float)
-    width, height = camera.size
-    support = SupportImage(np.zeros((height, width), dtype=np.float32))
-    silhouette = None
-    if with_silhouette:
-        silhouette = render_chain(body, camera, objective_q)
-        support = support_from_mask(silhouette, inside_cap_px=inside_cap_px, smooth_sigma_px=1.0)
-    object_mask = None
-    if obstacle_center is not None:
-        object_mask = square_mask(np.asarray(obstacle_center, dtype=float), obstacle_half_side, camera)
-        support = support + obstacle_support(object_mask, obstacle_influence_px)
-    return PlanarScene(body, camera, objective_q, silhouette, object_mask, support)
+from ibik_pin.configuration import Configuration
+from ibik_pin.model import load_planar_chain
+from ibik_pin.solvers import DampedLeastSquaresSolver, Solver, make_solver
+from ibik_pin.synthetic.planar import CHAIN_LENGTH, PlanarScene, make_scene
+from ibik_pin.tasks import FramePositionTask, ImageTask, View
 
 
 @dataclass
@@ -126,6 +30,7 @@ class PlanarRun:
     object_hits: int
 
 
+
 def segment_hits_object(scene: PlanarScene, q: np.ndarray, samples: int = 60) -> bool:
     """Whether any segment of the chain at q crosses the object in the image."""
     if scene.object_mask is None:
@@ -137,6 +42,7 @@ def segment_hits_object(scene: PlanarScene, q: np.ndarray, samples: int = 60) ->
     height, width = scene.object_mask.shape
     inside = (pixels[:, 0] >= 0) & (pixels[:, 0] < width) & (pixels[:, 1] >= 0) & (pixels[:, 1] < height)
     return bool(scene.object_mask[pixels[inside, 1], pixels[inside, 0]].any())
+
 
 
 def run_planar(
@@ -191,6 +97,7 @@ def run_planar(
     )
 
 
+
 def same_end_effector_configuration(
     objective_q: np.ndarray, start_q: np.ndarray, iterations: int = 200
 ) -> np.ndarray:
@@ -201,6 +108,7 @@ def same_end_effector_configuration(
     configuration = Configuration(body.model, start_q)
     DampedLeastSquaresSolver(damping=1e-4).solve(configuration, [[task]], iterations=iterations)
     return pin.normalize(body.model, configuration.q)
+
 
 
 @dataclass(frozen=True)
@@ -241,6 +149,7 @@ class PaperExperiment:
         return np.array(self.start_q)
 
 
+
 PAPER_EXPERIMENTS = {
     "fig6": PaperExperiment(
         "fig6", "different start and objective configurations",
@@ -256,6 +165,7 @@ PAPER_EXPERIMENTS = {
         obstacle_center=(0.35, 0.3, 0.0), end_effector_gain=0.3, image_step=0.05,
     ),
 }
+
 
 
 def run_paper_experiment(name: str, use_image: bool, solver_name: str = "stack") -> tuple[PlanarScene, PlanarRun]:

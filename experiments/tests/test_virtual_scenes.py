@@ -2,8 +2,7 @@
 
 import numpy as np
 import pytest
-
-from ibik_pin.virtual import PAPER_EXPERIMENTS, run_paper_experiment
+from paper.virtual_scenes import PAPER_EXPERIMENTS, run_paper_experiment
 
 SCHEMES = ["liegeois", "stack", "qp"]
 

@@ -1,172 +1,33 @@
-"""What a user looks at after tracking: plots (PNG), overlay videos (MP4), a 3D replay (HTML).
-
-Every file is written to a temporary name beside the destination and then renamed, so a failure
-never leaves half a file. The HTML replay is one self-contained file (inline CSS, JavaScript and
-data, no network), which any web browser opens offline.
+"""A 3D replay of the motion in one self-contained HTML file (no server, no network).
 """
 
 from __future__ import annotations
 
 import html
-import itertools
 import json
 import os
 import re
-from collections.abc import Iterable
-from pathlib import Path
 
-import cv2
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
-from .exceptions import FileFormatError, InputError
-from .io.motion import write_atomically, write_text_atomically
-from .render import draw_skeleton, overlay_mask
-
-__all__ = ["plot_series", "write_html_replay", "write_overlay_video"]
+from ibik_pin.exceptions import InputError
+from ibik_pin.io.files import write_text_atomically
 
 # Positions in the HTML replay are integers of this many metres: 0.1 mm.
 _HTML_UNIT = 1e-4
+
+
+
 _HTML_COLORS = ("#1f6fb4", "#e0592a")  # blue, orange: told apart also by most colour-blind eyes
+
+
+
 # Internal coordinates of the replay are Y up: (x, y, z) of a Z-up input become (x, z, -y).
 _UP_AXIS_TO_Y_UP = {
     "y": np.eye(3),
     "z": np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]),
 }
-# Mask pixels drawn as the background when there is no image: grey level (0-255).
-_MASK_GREY = 150
-_MISSING = object()
 
-
-def plot_series(
-    path: str | os.PathLike[str],
-    times: np.ndarray,
-    series: dict[str, np.ndarray],
-    ylabel: str,
-    title: str,
-    xlabel: str = "time [s]",
-) -> None:
-    """A PNG line plot of one or more series over time, with legend, grid and axis labels.
-
-    The figure is drawn with matplotlib's Agg canvas directly: no global backend is selected,
-    so the caller's matplotlib state is left alone. NaN values leave gaps in the lines.
-
-    Args:
-        path: The .png file to write.
-        times: Time of each sample, shape (F,) [s].
-        series: Legend label -> values, each of shape (F,), in the unit of ``ylabel``.
-        ylabel: The vertical axis label, unit included (e.g. ``"residual [mm]"``).
-        title: The title above the plot.
-        xlabel: The horizontal axis label, unit included.
-
-    Raises:
-        InputError: No series, or a series whose shape is not (F,), or the file cannot be
-            written.
-    """
-    times = np.asarray(times, dtype=float)
-    if times.ndim != 1:
-        raise InputError(f"times: expected shape (F,) [s], got {times.shape}")
-    if not series:
-        raise InputError("series: expected at least one series, got none")
-    checked = {}
-    for label, values in series.items():
-        values = np.asarray(values, dtype=float)
-        if values.shape != times.shape:
-            raise InputError(
-                f"series[{label!r}]: expected shape {times.shape} like times, got {values.shape}"
-            )
-        checked[label] = values
-
-    figure = Figure(figsize=(8.0, 4.5), dpi=100)
-    FigureCanvasAgg(figure)
-    axes = figure.add_subplot()
-    for label, values in checked.items():
-        axes.plot(times, values, label=label, linewidth=1.5)
-    axes.set_xlabel(xlabel)
-    axes.set_ylabel(ylabel)
-    axes.set_title(title)
-    axes.grid(True, alpha=0.4)
-    axes.legend(loc="best")
-    figure.tight_layout()
-    write_atomically(path, lambda temporary: figure.savefig(temporary, format="png"))
-
-
-def write_overlay_video(
-    path: str | os.PathLike[str],
-    frames_bgr: Iterable[np.ndarray] | None,
-    skeletons: Iterable[tuple[np.ndarray, np.ndarray]],
-    fps: float,
-    masks: Iterable[np.ndarray] | None = None,
-    skeleton_color: tuple[int, int, int] = (0, 255, 0),
-    mask_color: tuple[int, int, int] = (0, 0, 255),
-) -> int:
-    """An MP4 video (``mp4v``) of the projected skeleton over the images and silhouettes.
-
-    Each video frame is the image, with the silhouette mask blended over it in ``mask_color``
-    if masks are given, and the skeleton drawn with :func:`~ibik_pin.render.draw_skeleton`.
-    Without images (``frames_bgr=None``) the mask itself is the background, drawn grey on black.
-    The inputs are consumed one frame at a time (generators are fine: a long video is never
-    held in memory) and must yield as many items each.
-
-    Args:
-        path: The .mp4 file to write.
-        frames_bgr: Images, each (H, W, 3) BGR or (H, W) grey, uint8, all of one size; or None.
-        skeletons: Per frame, the segments' start and end pixels, shapes (S, 2) and (S, 2) [px];
-            segments with a non-finite end are not drawn.
-        fps: Frames per second of the video [Hz].
-        masks: Per frame, the (H, W) silhouette (bool, or non-zero = inside); or None.
-        skeleton_color: BGR colour of the skeleton.
-        mask_color: BGR colour blended over the silhouette (opacity 0.4).
-
-    Returns:
-        The number of frames written.
-
-    Raises:
-        InputError: Neither images nor masks, no frame, a frame of another size or kind, the
-            inputs of different lengths, or ``fps`` not positive.
-        FileFormatError: OpenCV cannot open a video writer for ``path``.
-    """
-    if not np.isfinite(fps) or fps <= 0.0:
-        raise InputError(f"fps: expected a positive number [Hz], got {fps}")
-    if frames_bgr is None and masks is None:
-        raise InputError("frames_bgr, masks: expected images, masks or both, got neither")
-    sources = {"skeletons": skeletons, "frames_bgr": frames_bgr, "masks": masks}
-    sources = {name: iter(source) for name, source in sources.items() if source is not None}
-
-    def write(temporary: Path) -> int:
-        writer = None
-        try:
-            items_per_frame = itertools.zip_longest(*sources.values(), fillvalue=_MISSING)
-            for index, items in enumerate(items_per_frame):
-                item = dict(zip(sources, items))
-                ended = [name for name, value in item.items() if value is _MISSING]
-                if ended:
-                    longer = [name for name in item if name not in ended]
-                    raise InputError(
-                        f"{', '.join(ended)}: ended after {index} frames, but "
-                        f"{', '.join(longer)} went on: expected as many frames in each"
-                    )
-                image = _overlay_frame(index, item, skeleton_color, mask_color)
-                if writer is None:
-                    size = (image.shape[1], image.shape[0])
-                    writer = _open_video_writer(temporary, path, fps, size)
-                elif (image.shape[1], image.shape[0]) != size:
-                    raise InputError(
-                        f"frame {index}: expected {size[0]} x {size[1]} px like frame 0, got "
-                        f"{image.shape[1]} x {image.shape[0]} px"
-                    )
-                writer.write(image)
-            if writer is None:
-                raise InputError(
-                    f"{', '.join(sources)}: expected at least one frame, got none"
-                )
-            return index + 1
-        finally:
-            if writer is not None:
-                writer.release()
-
-    return write_atomically(path, write)
 
 
 def write_html_replay(
@@ -294,71 +155,12 @@ def write_html_replay(
     write_text_atomically(path, page)
 
 
+
 def _json_integers(points: np.ndarray, finite: np.ndarray) -> str:
     """A JSON array of the (F, K, 3) integer points, flat, a missing point as 3 nulls."""
     tokens = np.where(finite[..., np.newaxis], points, 0.0).astype(np.int64).astype(str)
     tokens[~finite] = "null"
     return "[" + ",".join(tokens.ravel().tolist()) + "]"
-
-
-def _overlay_frame(
-    index: int,
-    item: dict[str, object],
-    skeleton_color: tuple[int, int, int],
-    mask_color: tuple[int, int, int],
-) -> np.ndarray:
-    """Frame `index` of an overlay video: image or grey mask, coloured mask, skeleton."""
-    mask = None
-    if "masks" in item:
-        mask = np.asarray(item["masks"])
-        if mask.ndim != 2:
-            raise InputError(
-                f"masks: expected (H, W) silhouettes, got shape {mask.shape} at frame {index}"
-            )
-        mask = mask != 0
-    if "frames_bgr" in item:
-        image = np.asarray(item["frames_bgr"])
-        is_bgr = image.ndim == 3 and image.shape[2] == 3
-        if image.dtype != np.uint8 or not (image.ndim == 2 or is_bgr):
-            raise InputError(
-                f"frames_bgr: expected (H, W, 3) BGR or (H, W) grey uint8 images, got shape "
-                f"{image.shape} and dtype {image.dtype} at frame {index}"
-            )
-        image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR) if image.ndim == 2 else image
-        if mask is not None:
-            if mask.shape != image.shape[:2]:
-                raise InputError(
-                    f"masks: expected shape {image.shape[:2]} like the image, got {mask.shape} "
-                    f"at frame {index}"
-                )
-            image = overlay_mask(image, mask, color=mask_color, alpha=0.4)
-    else:
-        image = np.zeros((*mask.shape, 3), np.uint8)
-        image[mask] = _MASK_GREY
-    skeleton = item["skeletons"]
-    if not isinstance(skeleton, (tuple, list)) or len(skeleton) != 2:
-        raise InputError(
-            f"skeletons: expected a pair (starts (S, 2), ends (S, 2)) [px] at frame {index}, "
-            f"got {type(skeleton).__name__}"
-        )
-    return draw_skeleton(image, skeleton[0], skeleton[1], color=skeleton_color)
-
-
-def _open_video_writer(
-    temporary: Path, path: str | os.PathLike[str], fps: float, size: tuple[int, int]
-) -> cv2.VideoWriter:
-    try:
-        writer = cv2.VideoWriter(str(temporary), cv2.VideoWriter_fourcc(*"mp4v"), float(fps), size)
-    except cv2.error as error:
-        raise FileFormatError(f"{path}: OpenCV cannot write an mp4v video: {error}") from None
-    if not writer.isOpened():
-        writer.release()
-        raise FileFormatError(
-            f"{path}: OpenCV cannot open an mp4v video writer ({size[0]} x {size[1]} px at "
-            f"{fps} fps); check the folder exists and is writable"
-        )
-    return writer
-
 
 
 

@@ -16,13 +16,14 @@ from typing import Callable, Sequence
 import numpy as np
 import pinocchio as pin
 
-from .configuration import Configuration
-from .exceptions import EmptySilhouetteWarning, InputError
-from .images import TemporalMajority, support_from_mask
-from .limits import JointLimits
-from .model import BodyModel
-from .solvers import make_solver
-from .tasks import FramePositionTask, ImageTask, PostureTask, View
+from ibik_pin.configuration import Configuration
+from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
+from ibik_pin.limits import JointLimits
+from ibik_pin.model import BodyModel
+from ibik_pin.solvers import make_solver
+from ibik_pin.tasks import FramePositionTask, ImageTask, PostureTask, View
+from ibik_pin.vision.segmentation import TemporalMajority
+from ibik_pin.vision.support import support_from_mask
 
 LOWER_BODY = {"Hip", "LHip", "RHip", "LKnee", "RKnee", "LAnkle", "RAnkle", "LBigToe", "LSmallToe",
               "LHeel", "RBigToe", "RSmallToe", "RHeel"}

@@ -44,8 +44,8 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 import pinocchio as pin
 
-from .exceptions import IbikWarning, InputError, UnknownNameError
-from .model import BodyModel
+from ibik_pin.exceptions import IbikWarning, InputError, UnknownNameError
+from ibik_pin.model import BodyModel
 
 __all__ = [
     "HUMAN_NEUTRAL_STATURE_M",

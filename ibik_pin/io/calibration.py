@@ -1,0 +1,197 @@
+"""Pose2Sim calibration files (TOML): read and write calibrated pinhole cameras.
+
+One section per camera with the keys ``name``, ``size`` = [width, height], ``matrix`` (3 x 3),
+``distortions`` (k1, k2, p1, p2), ``rotation`` (Rodrigues vector, world to camera), ``translation``
+[m] and ``fisheye``. Pose2Sim's world is Z-up; its TRC files are Y-up.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import sys
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from ibik_pin.exceptions import FileFormatError, InputError
+from ibik_pin.io.files import PathLike, write_text_atomically
+from ibik_pin.vision.camera import PinholeCamera, _as_array, _as_size
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - exercised on Python 3.10 only
+    import tomli as tomllib
+
+
+# Pose2Sim sections that do not describe a camera.
+_NON_CAMERA_SECTIONS = frozenset({"metadata", "capture_volume", "charuco", "checkerboard"})
+
+
+
+_BARE_TOML_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
+
+
+
+def read_calibration(path: PathLike) -> list[PinholeCamera]:
+    """Cameras from a Pose2Sim calibration TOML file, in file order.
+
+    Every top-level table except Pose2Sim's non-camera sections (``metadata``,
+    ``capture_volume``, ``charuco``, ``checkerboard``) is a camera with the keys ``name``,
+    ``size`` [w, h], ``matrix`` (3 x 3), ``distortions`` (4 values k1, k2, p1, p2, or 5 with
+    k3), ``rotation`` (Rodrigues, world to camera), ``translation`` [m] and optionally
+    ``fisheye`` (absent means false).
+
+    Args:
+        path: the TOML file.
+
+    Returns:
+        The cameras.
+
+    Raises:
+        FileFormatError: the file cannot be read or parsed, a key is missing, a value has the
+            wrong shape or is not finite, ``fisheye = true`` (not supported), two cameras share
+            a name, or no camera section; the message names the file, section and key.
+    """
+    path = Path(path)
+    try:
+        with open(path, "rb") as stream:
+            document = tomllib.load(stream)
+    except OSError as error:
+        raise FileFormatError(f"calibration file '{path}': cannot be read ({error.strerror or error})") from None
+    except tomllib.TOMLDecodeError as error:
+        raise FileFormatError(
+            f"calibration file '{path}': expected valid TOML, found a syntax error: {error}"
+        ) from None
+
+    cameras: list[PinholeCamera] = []
+    for section, table in document.items():
+        if section in _NON_CAMERA_SECTIONS or not isinstance(table, dict):
+            continue
+        cameras.append(_camera_from_section(path, section, table))
+    if not cameras:
+        raise FileFormatError(
+            f"calibration file '{path}': expected at least one camera section, found sections {list(document)}"
+        )
+    names = [camera.name for camera in cameras]
+    repeated = sorted({name for name in names if names.count(name) > 1})
+    if repeated:
+        raise FileFormatError(
+            f"calibration file '{path}': key 'name': expected unique camera names, found {repeated} repeated"
+        )
+    return cameras
+
+
+
+def _camera_from_section(path: Path, section: str, table: dict) -> PinholeCamera:
+    where = f"calibration file '{path}', section [{section}]"
+
+    def value(key: str, shapes, description: str) -> np.ndarray:
+        if key not in table:
+            raise FileFormatError(f"{where}: missing key '{key}' ({description}); found keys {sorted(table)}")
+        try:
+            return _as_array(table[key], shapes, key)
+        except InputError as error:
+            raise FileFormatError(f"{where}, key '{key}' ({description}): {_detail(error)}") from None
+
+    if "name" not in table:
+        raise FileFormatError(f"{where}: missing key 'name' (camera name); found keys {sorted(table)}")
+    name = table["name"]
+    if not isinstance(name, str) or not name:
+        raise FileFormatError(f"{where}, key 'name': expected a non-empty string, found {name!r}")
+    fisheye = table.get("fisheye", False)
+    if not isinstance(fisheye, bool):
+        raise FileFormatError(f"{where}, key 'fisheye': expected true or false, found {fisheye!r}")
+    if fisheye:
+        raise FileFormatError(
+            f"{where}, key 'fisheye': fisheye = true is not supported; expected false "
+            "(OpenCV pinhole model with k1, k2, p1, p2[, k3] distortion)"
+        )
+    size = value("size", (2,), "[width, height] in pixels")
+    intrinsics = value("matrix", (3, 3), "3 x 3 intrinsic matrix")
+    distortion = value("distortions", [(4,), (5,)], "k1, k2, p1, p2[, k3]")
+    rvec = value("rotation", (3,), "Rodrigues vector, world to camera")
+    tvec = value("translation", (3,), "world to camera [m]")
+    try:
+        size = _as_size(size.tolist())
+    except InputError as error:
+        raise FileFormatError(f"{where}, key 'size': {_detail(error)}") from None
+    try:
+        return PinholeCamera.from_rodrigues(name, size, intrinsics, distortion, rvec, tvec)
+    except InputError as error:
+        parameter = str(error).split(":")[0]
+        key = {"intrinsics": "matrix", "distortion": "distortions", "rvec": "rotation"}.get(parameter, parameter)
+        raise FileFormatError(f"{where}, key '{key}': {_detail(error)}") from None
+
+
+
+def _detail(error: InputError) -> str:
+    """The message of an InputError without its leading 'parameter: '."""
+    message = str(error)
+    return message.split(": ", 1)[1] if ": " in message else message
+
+
+
+def _toml_key(name: str) -> str:
+    return name if _BARE_TOML_KEY.match(name) else json.dumps(name, ensure_ascii=False)
+
+
+
+def _toml_array(values: np.ndarray) -> str:
+    if values.ndim == 1:
+        return "[ " + ", ".join(repr(float(v)) for v in values) + "]"
+    return "[ " + ", ".join(_toml_array(row) for row in values) + "]"
+
+
+
+def write_calibration(path: PathLike, cameras: Sequence[PinholeCamera]) -> None:
+    """Write cameras to a Pose2Sim calibration TOML file (atomically: temporary file, then rename).
+
+    Floats are written with full precision, so :func:`read_calibration` gives the same cameras
+    back (rotation up to the Rodrigues round trip, ~1e-15).
+
+    Args:
+        path: the TOML file to write.
+        cameras: pinhole cameras with distinct names.
+
+    Raises:
+        InputError: a camera is not a :class:`PinholeCamera`, or names repeat or are reserved.
+        OSError: the file cannot be written.
+    """
+    path = Path(path)
+    lines: list[str] = []
+    seen: set[str] = set()
+    for index, camera in enumerate(cameras):
+        if not isinstance(camera, PinholeCamera):
+            raise InputError(
+                f"cameras[{index}]: expected a PinholeCamera (the TOML format has no other kind), "
+                f"found {type(camera).__name__}"
+            )
+        if camera.name in seen or camera.name in _NON_CAMERA_SECTIONS:
+            raise InputError(
+                f"cameras[{index}].name: expected a unique name other than {sorted(_NON_CAMERA_SECTIONS)}, "
+                f"found {camera.name!r}"
+            )
+        seen.add(camera.name)
+        lines += [
+            f"[{_toml_key(camera.name)}]",
+            f"name = {json.dumps(camera.name, ensure_ascii=False)}",
+            f"size = {_toml_array(np.asarray(camera.size, dtype=np.float64))}",
+            f"matrix = {_toml_array(camera.intrinsics)}",
+            f"distortions = {_toml_array(camera.distortion)}",
+            f"rotation = {_toml_array(camera.rvec)}",
+            f"translation = {_toml_array(camera.translation)}",
+            "fisheye = false",
+            "",
+        ]
+    if not seen:
+        raise InputError("cameras: expected at least one camera, found none")
+    lines += ["[metadata]", "adjusted = false", "error = 0.0", ""]
+    write_text_atomically(path, "\n".join(lines))
+
+
+
+# Pose2Sim writes TRC files Y-up while its calibration's world is Z-up: a TRC point (x, y, z) is the
+# calibration-world point (z, x, y) (see ../shared/data/README.md, pose2sim_demo).
+POSE2SIM_TRC_TO_WORLD = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])

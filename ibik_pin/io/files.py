@@ -1,0 +1,97 @@
+"""Reading and writing files safely: text with clear errors, atomic writes."""
+
+from __future__ import annotations
+
+import os
+import uuid
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+from typing import TypeVar, Union
+
+from ibik_pin.exceptions import (
+    FileFormatError,
+    IbikWarning,
+    InputError,
+)
+
+PathLike = Union[str, os.PathLike]
+
+
+_Result = TypeVar("_Result")
+
+
+
+def read_text(path: str | os.PathLike[str], what: str) -> str:
+    """The text of a file, any failure to read it raised as a FileFormatError.
+
+    Args:
+        path: The file.
+        what: The kind of file, for the message (e.g. ``"TRC"``).
+
+    Returns:
+        Its content, universal newlines.
+
+    Raises:
+        FileFormatError: The file is missing, unreadable or not UTF-8 text.
+    """
+    try:
+        return Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as error:
+        raise FileFormatError(f"{path}: cannot read this {what} file: {error}") from error
+
+
+
+def is_number(text: str) -> bool:
+    """Whether ``float(text)`` succeeds; finds the offending cell for an error message."""
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+
+def check_declared_count(path, key: str, declared: int, found: int, what: str) -> None:
+    """Compare a header's declared count of rows (TRC NumFrames, MOT nRows, BVH Frames) with the
+    rows the file holds: fewer is a FileFormatError, more are kept with an IbikWarning that points
+    at the reader's caller."""
+    message = f"{path}: {key} is {declared} but the file holds {found} {what}"
+    if found < declared:
+        raise FileFormatError(message)
+    if found > declared:
+        warnings.warn(f"{message}; all {what} are kept", IbikWarning, stacklevel=3)
+
+
+
+def write_atomically(path: str | os.PathLike[str], write: Callable[[Path], _Result]) -> _Result:
+    """Call ``write(temporary)``, then move the temporary file onto `path`; clean up on failure.
+
+    The temporary file is in the destination folder (so ``os.replace`` is atomic on POSIX and
+    Windows) and keeps the suffix (OpenCV picks a container or a format from it).
+
+    Raises:
+        InputError: The file cannot be written (missing folder, permissions, full disk).
+    """
+    path = Path(path)
+    temporary = path.with_name(f".{path.stem}.{uuid.uuid4().hex}.tmp{path.suffix}")
+    try:
+        result = write(temporary)
+        os.replace(temporary, path)
+    except BaseException as error:
+        temporary.unlink(missing_ok=True)
+        if isinstance(error, OSError):
+            raise InputError(f"{path}: cannot write: {error}") from error
+        raise
+    return result
+
+
+
+def write_text_atomically(path: str | os.PathLike[str], text: str) -> None:
+    """Write text to `path` in one ``os.replace`` (see write_atomically); newlines as given."""
+
+    def write(temporary: Path) -> None:
+        with open(temporary, "x", encoding="utf-8", newline="\n") as stream:
+            stream.write(text)
+
+    write_atomically(path, write)

@@ -1,0 +1,72 @@
+"""Silhouette masks on disk: one image per frame, non-zero = person.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ibik_pin.exceptions import FileFormatError, InputError
+from ibik_pin.io.files import PathLike
+
+IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"})
+
+
+
+def read_mask(path: PathLike, expected_size: tuple[int, int] | None = None) -> np.ndarray:
+    """A silhouette mask from an image file.
+
+    The image is read as grey levels; a 0/255 mask (also after JPEG compression) is thresholded
+    at mid-grey, a 0/1 label image (maximum <= 127) at non-zero.
+
+    Args:
+        path: image file (png, jpg, bmp, tif, ...).
+        expected_size: (width, height) [px] the mask must have, or None.
+
+    Returns:
+        (H, W) bool mask, True = person.
+
+    Raises:
+        FileFormatError: the file is missing or OpenCV cannot decode it.
+        InputError: the size differs from ``expected_size``.
+    """
+    path = Path(path)
+    image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE) if path.is_file() else None
+    if image is None:
+        reason = "file not found" if not path.exists() else "OpenCV cannot decode it as an image"
+        raise FileFormatError(f"mask file '{path}': expected a readable image, found {reason}")
+    found = (image.shape[1], image.shape[0])
+    if expected_size is not None and tuple(int(s) for s in expected_size) != found:
+        raise InputError(
+            f"mask file '{path}': expected size (w, h) = {tuple(int(s) for s in expected_size)}, found (w, h) = {found}"
+        )
+    threshold = 127 if image.max() > 127 else 0
+    return image > threshold
+
+
+
+def _natural_key(path: Path) -> list:
+    return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", path.name)]
+
+
+
+def list_mask_files(folder: PathLike) -> list[Path]:
+    """Image files of a folder (png, jpg, jpeg, bmp, tif, tiff, any case), sorted by file name.
+
+    Numbers in names compare as numbers (``frame2`` before ``frame10``).
+
+    Raises:
+        FileFormatError: the folder does not exist or holds no image file.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise FileFormatError(f"mask folder '{folder}': expected a directory, found none")
+    files = [path for path in folder.iterdir() if path.is_file() and path.suffix.lower() in IMAGE_SUFFIXES]
+    if not files:
+        raise FileFormatError(
+            f"mask folder '{folder}': expected image files ({', '.join(sorted(IMAGE_SUFFIXES))}), found none"
+        )
+    return sorted(files, key=_natural_key)

@@ -1,0 +1,271 @@
+"""Support images: what the image criterion reads, and its exact derivative.
+
+A support image I_c holds, for one view, how much a projected skeleton sample is rewarded at
+each pixel [support units; px for a distance]. The image criterion reads it at projected points
+with bilinear interpolation and follows the exact derivative of that interpolant.
+
+Pixel convention (OpenCV's, as in :mod:`ibik_pin.vision.camera`): the centre of pixel (row i,
+column j) is at ``u = j, v = i``.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import cv2
+import numpy as np
+
+from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
+
+
+class SupportSample(NamedTuple):
+    """A support image read at points.
+
+    Attributes:
+        values: (N,) interpolated support [support units].
+        gradient: (N, 2) derivative of ``values`` with respect to (u, v) [support units/px].
+    """
+
+    values: np.ndarray
+    gradient: np.ndarray
+
+
+
+def _as_pixels(pixels) -> np.ndarray:
+    pixels = np.asarray(pixels, dtype=np.float64)
+    if pixels.ndim != 2 or pixels.shape[1] != 2:
+        raise InputError(f"pixels: expected an array of shape (N, 2) [px], found shape {pixels.shape}")
+    nan_rows = np.isnan(pixels).any(axis=1)
+    if nan_rows.any():  # infinite coordinates are fine: clamped to the border
+        raise InputError(f"pixels: expected coordinates that are not NaN, found {int(nan_rows.sum())} row(s) with NaN")
+    return pixels
+
+
+
+@dataclass(frozen=True, eq=False)
+class SupportImage:
+    """A support image of one view and whether the image term uses it.
+
+    Attributes:
+        values: (H, W) float32 support [support units], read-only.
+        enabled: False when the view has no usable silhouette (empty mask): the image term
+            skips the view.
+    """
+
+    values: np.ndarray
+    enabled: bool = True
+
+    def __post_init__(self) -> None:
+        values = np.asarray(self.values)
+        if values.ndim != 2 or values.shape[0] < 1 or values.shape[1] < 1:
+            raise InputError(f"values: expected a non-empty (H, W) array, found shape {values.shape}")
+        if not np.issubdtype(values.dtype, np.number) or np.issubdtype(values.dtype, np.complexfloating):
+            raise InputError(f"values: expected real numbers, found dtype {values.dtype}")
+        values = np.array(values, dtype=np.float32, order="C", copy=True)
+        if not np.all(np.isfinite(values)):
+            raise InputError("values: expected finite support values, found NaN or infinity")
+        values.setflags(write=False)
+        object.__setattr__(self, "values", values)
+        object.__setattr__(self, "enabled", bool(self.enabled))
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(width, height) [px]."""
+        return self.values.shape[1], self.values.shape[0]
+
+    def __add__(self, other: "SupportImage") -> "SupportImage":
+        """Pixel-wise sum, e.g. a silhouette support plus an :func:`obstacle_support`.
+
+        The sum is enabled only if both terms are: a view disabled for an empty silhouette
+        stays disabled.
+        """
+        if not isinstance(other, SupportImage):
+            return NotImplemented
+        if other.values.shape != self.values.shape:
+            raise InputError(
+                f"other: expected a support image of size (w, h) = {self.size}, found {other.size}"
+            )
+        return SupportImage(self.values + other.values, self.enabled and other.enabled)
+
+    def sample_mask(self, pixels: np.ndarray) -> np.ndarray:
+        """(N,) True for pixels (N, 2) [px] inside the image (0 <= u <= W - 1, 0 <= v <= H - 1)."""
+        pixels = _as_pixels(pixels)
+        height, width = self.values.shape
+        u, v = pixels[:, 0], pixels[:, 1]
+        return (u >= 0.0) & (u <= width - 1) & (v >= 0.0) & (v <= height - 1)
+
+    def sample(self, pixels: np.ndarray) -> SupportSample:
+        """Bilinear interpolation of the support and its exact derivative at pixels.
+
+        The gradient is the derivative of the same piecewise-bilinear interpolant, so it agrees
+        with finite differences to rounding inside each pixel cell. Outside the image
+        (infinity included) the coordinates are clamped to the border and the gradient along a
+        clamped axis is zero.
+
+        Args:
+            pixels: (N, 2) image coordinates (u, v) [px].
+
+        Returns:
+            :class:`SupportSample` with values (N,) and gradient (N, 2) d values / d (u, v).
+        """
+        pixels = _as_pixels(pixels)
+        height, width = self.values.shape
+        u = np.clip(pixels[:, 0], 0.0, width - 1)
+        v = np.clip(pixels[:, 1], 0.0, height - 1)
+        # Cell corner (column0, row0); on the last column/row use the cell to its left/above,
+        # so that u = W - 1 interpolates with weight 1 on the last pixel.
+        column0 = np.minimum(u.astype(np.intp), max(width - 2, 0))
+        row0 = np.minimum(v.astype(np.intp), max(height - 2, 0))
+        column1 = np.minimum(column0 + 1, width - 1)
+        row1 = np.minimum(row0 + 1, height - 1)
+        fraction_u = u - column0
+        fraction_v = v - row0
+        flat = self.values.ravel()
+        top_left = flat[row0 * width + column0].astype(np.float64)
+        top_right = flat[row0 * width + column1].astype(np.float64)
+        bottom_left = flat[row1 * width + column0].astype(np.float64)
+        bottom_right = flat[row1 * width + column1].astype(np.float64)
+        top = top_left + fraction_u * (top_right - top_left)
+        bottom = bottom_left + fraction_u * (bottom_right - bottom_left)
+        values = top + fraction_v * (bottom - top)
+        gradient = np.empty((pixels.shape[0], 2))
+        gradient[:, 0] = (1.0 - fraction_v) * (top_right - top_left) + fraction_v * (bottom_right - bottom_left)
+        gradient[:, 1] = bottom - top
+        gradient[:, 0] *= (pixels[:, 0] >= 0.0) & (pixels[:, 0] <= width - 1)
+        gradient[:, 1] *= (pixels[:, 1] >= 0.0) & (pixels[:, 1] <= height - 1)
+        return SupportSample(values, gradient)
+
+
+
+def _as_mask(mask, name: str = "mask") -> np.ndarray:
+    """A (H, W) bool array from a bool or uint8 mask (non-zero = set), else InputError."""
+    if not isinstance(mask, np.ndarray):
+        raise InputError(f"{name}: expected a numpy array of dtype bool or uint8, found {type(mask).__name__}")
+    if mask.dtype not in (np.bool_, np.uint8):
+        raise InputError(f"{name}: expected dtype bool or uint8 (non-zero = set), found dtype {mask.dtype}")
+    if mask.ndim != 2 or mask.shape[0] < 1 or mask.shape[1] < 1:
+        raise InputError(f"{name}: expected a 2D (H, W) array, found shape {mask.shape}")
+    return mask != 0
+
+
+
+def _positive_or_none(value, name: str) -> float | None:
+    if value is None:
+        return None
+    value = float(value)
+    if not np.isfinite(value) or value <= 0.0:
+        raise InputError(f"{name}: expected a positive number of pixels or None, found {value}")
+    return value
+
+
+
+def _signed_distance(mask: np.ndarray) -> np.ndarray:
+    """(H, W) float32 signed Euclidean distance [px] to the mask's border, positive inside.
+
+    The border is taken halfway between a set and an unset pixel, hence the 0.5 shifts: the
+    distance then grows by 1 px per pixel across the border as well. The image edge is no
+    border (a body cut by the frame continues outside it). Needs both set and unset pixels.
+    """
+    mask_u8 = mask.astype(np.uint8)
+    try:
+        inside = cv2.distanceTransform(mask_u8, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+        outside = cv2.distanceTransform(1 - mask_u8, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    except cv2.error as error:  # pragma: no cover - OpenCV rejects only malformed input, checked above
+        raise InputError(f"mask: OpenCV's distance transform failed: {error}") from None
+    return np.where(mask, inside - 0.5, 0.5 - outside).astype(np.float32)
+
+
+
+def _smooth(values: np.ndarray, sigma_px: float) -> np.ndarray:
+    if sigma_px == 0.0:
+        return values
+    return cv2.GaussianBlur(values, (0, 0), sigmaX=sigma_px, sigmaY=sigma_px, borderType=cv2.BORDER_REPLICATE)
+
+
+
+def support_from_mask(
+    mask: np.ndarray,
+    inside_cap_px: float | None = 6.0,
+    outside_cap_px: float | None = None,
+    smooth_sigma_px: float = 1.0,
+) -> SupportImage:
+    """The signed-distance support of a silhouette.
+
+    Inside the silhouette: the distance to its border, capped at ``inside_cap_px`` (about a
+    limb's half-width: the uncapped distance peaks in the trunk and pulls limb segments through
+    it). Outside: minus the distance to the body (optionally truncated at ``outside_cap_px``),
+    so that a segment lying outside is pulled in. Then a light Gaussian blur.
+
+    Args:
+        mask: (H, W) bool or uint8 silhouette, non-zero = person.
+        inside_cap_px: cap of the inside distance [px]; None for no cap.
+        outside_cap_px: truncation of the outside distance [px]; None for none.
+        smooth_sigma_px: standard deviation of the Gaussian blur [px]; 0 for none.
+
+    Returns:
+        The support [px]. An empty mask gives zeros with ``enabled=False`` and an
+        :class:`EmptySilhouetteWarning`.
+
+    Raises:
+        InputError: the mask is not a 2D bool/uint8 array, or a parameter is out of range.
+    """
+    mask = _as_mask(mask)
+    inside_cap_px = _positive_or_none(inside_cap_px, "inside_cap_px")
+    outside_cap_px = _positive_or_none(outside_cap_px, "outside_cap_px")
+    smooth_sigma_px = float(smooth_sigma_px)
+    if not np.isfinite(smooth_sigma_px) or smooth_sigma_px < 0.0:
+        raise InputError(f"smooth_sigma_px: expected a non-negative number of pixels, found {smooth_sigma_px}")
+    if not mask.any():
+        warnings.warn(
+            f"mask: the silhouette of size (w, h) = {(mask.shape[1], mask.shape[0])} is empty; "
+            "the image term is disabled for this view",
+            EmptySilhouetteWarning,
+            stacklevel=2,
+        )
+        return SupportImage(np.zeros(mask.shape, np.float32), enabled=False)
+    if mask.all():
+        # No border in the image: every pixel is deep inside.
+        inside_value = inside_cap_px if inside_cap_px is not None else float(max(mask.shape))
+        return SupportImage(np.full(mask.shape, inside_value, np.float32))
+    values = _signed_distance(mask)
+    if inside_cap_px is not None:
+        np.minimum(values, inside_cap_px, out=values)
+    if outside_cap_px is not None:
+        np.maximum(values, -outside_cap_px, out=values)
+    return SupportImage(_smooth(values, smooth_sigma_px))
+
+
+
+def obstacle_support(object_mask: np.ndarray, influence_px: float) -> SupportImage:
+    """A repulsive support around an object drawn into the image (the paper's Figure 8).
+
+    With s the signed distance to the object's border [px] (positive outside, L = influence_px):
+    0 for s >= L, ``-L (1 - s/L)^2`` for 0 <= s < L (smooth at s = L, slope 2 at the border) and
+    ``-L + 2 s`` inside (s < 0: keeps decreasing toward the object's middle, so a sample inside
+    is pushed out). Add it to a silhouette support with ``+``; scale ``influence_px`` to make
+    the obstacle weigh more or less against the silhouette.
+
+    Args:
+        object_mask: (H, W) bool or uint8, non-zero = object.
+        influence_px: distance over which the object repels [px].
+
+    Returns:
+        The support [px], all zeros (and enabled) if the object mask is empty.
+
+    Raises:
+        InputError: the mask is not a 2D bool/uint8 array, or ``influence_px`` is not positive.
+    """
+    mask = _as_mask(object_mask, "object_mask")
+    influence = _positive_or_none(influence_px, "influence_px")
+    if influence is None:
+        raise InputError("influence_px: expected a positive number of pixels, found None")
+    if not mask.any():
+        return SupportImage(np.zeros(mask.shape, np.float32))
+    if mask.all():
+        return SupportImage(np.full(mask.shape, -influence - float(max(mask.shape)), np.float32))
+    distance = -_signed_distance(mask).astype(np.float64)  # positive outside the object
+    ramp = 1.0 - np.clip(distance, 0.0, influence) / influence
+    values = np.where(distance >= 0.0, -influence * ramp * ramp, -influence + 2.0 * distance)
+    return SupportImage(values)
