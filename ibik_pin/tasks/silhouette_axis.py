@@ -1,0 +1,165 @@
+"""The silhouette explained by the skeleton: its medial axis drawn to the nearest projected segment.
+
+The paper's criterion (eq. 5-6, :mod:`ibik_pin.tasks.image`) is one-way: it rewards a skeleton for
+lying inside the silhouette, never for accounting for all of it. Inside a capped support it is flat:
+a nearly straight leg whose knee swivels, or an arm held over the trunk, scores the same wherever it
+lies within the silhouette. This term is the other way round: every sample x_i of the silhouette's
+medial axis (:func:`ibik_pin.vision.medial_axis.medial_axis_pixels`) asks that some projected
+segment pass through it:
+
+    h_axis(q) = - mean over views and samples of  c/2 (1 - exp(-(d_i / c)^2))
+
+with d_i [px] the distance from x_i to the nearest projected segment (the segment between the
+projections of its two end keypoints) and c [px] a robust scale: a sample much farther than c from
+every segment (a spur of the axis, clutter, a limb the model lacks) weighs almost nothing. The term
+asks for centre lines on centre lines, so it needs no body widths.
+
+Gradient (the nearest segment and the closest point's parameter s held, which is exact for the
+minimum over s and almost everywhere for the minimum over segments):
+
+    dh/dq = mean of  exp(-(d_i/c)^2) / c  r_i^T ((1 - s) dpi/dX J_a + s dpi/dX J_b)
+
+with r_i = x_i - p_i the residual from the closest point p_i to the sample [px], J_a and J_b the
+translation Jacobians of the segment's end frames and dpi/dX the projection Jacobian.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from ibik_pin.configuration import Configuration
+from ibik_pin.exceptions import InputError
+from ibik_pin.model import BodyModel
+from ibik_pin.tasks.base import GradientTask
+
+__all__ = ["AxisView", "SilhouetteAxisTask"]
+
+
+@dataclass
+class AxisView:
+    """One camera and the medial-axis samples of its silhouette.
+
+    Attributes:
+        camera: a camera with ``project_with_jacobian(points_world (K, 3))`` returning pixels
+            (K, 2), d pixels / d X_world (K, 2, 3) and depth (K,).
+        pixels: (N, 2) medial-axis samples (u, v) [px]; N = 0 disables the view.
+        robust_scale_px: c, the distance [px] beyond which a sample stops pulling.
+    """
+
+    camera: object
+    pixels: np.ndarray
+    robust_scale_px: float
+
+    def __post_init__(self) -> None:
+        self.pixels = np.asarray(self.pixels, dtype=np.float64).reshape(-1, 2)
+        if not np.isfinite(self.pixels).all():
+            raise InputError("pixels: the medial-axis samples must be finite [px]")
+        if not (np.isfinite(self.robust_scale_px) and self.robust_scale_px > 0.0):
+            raise InputError(f"robust_scale_px: expected a positive distance [px], found {self.robust_scale_px}")
+
+
+class SilhouetteAxisTask(GradientTask):
+    """Maximise h_axis: every medial-axis sample of every view near some projected segment.
+
+    Attributes:
+        body: the body model (keypoints and segments).
+        segments: the keypoint pairs that can explain an axis sample.
+        views: the views; replace with `set_views` per frame.
+    """
+
+    def __init__(
+        self,
+        body: BodyModel,
+        views: Sequence[AxisView] = (),
+        segments: Sequence[tuple[str, str]] | None = None,
+        max_step_size: float = 0.05,
+        min_step_size: float = 1e-4,
+    ) -> None:
+        super().__init__(max_step_size, min_step_size)
+        self.body = body
+        self.segments = list(body.segments if segments is None else segments)
+        if not self.segments:
+            raise InputError("the silhouette-axis task needs at least one segment")
+        segment_frames = np.array([[body.frame_id(a), body.frame_id(b)] for a, b in self.segments], dtype=int)
+        # Unique end frames: each projection and Jacobian is computed once per step.
+        self._frame_ids, inverse = np.unique(segment_frames, return_inverse=True)
+        inverse = inverse.reshape(-1, 2)
+        self._start_index, self._end_index = inverse[:, 0], inverse[:, 1]
+        self.views: list[AxisView] = []
+        self.set_views(views)
+
+    def set_views(self, views: Sequence[AxisView]) -> None:
+        """Replace the views (the next frame's axis samples); views without samples are skipped."""
+        self.views = list(views)
+        self._active_views = [view for view in self.views if len(view.pixels)]
+        self.enabled = bool(self._active_views)
+        self._cache_version = -1
+        self._cache: tuple[float, np.ndarray] | None = None
+
+    def _evaluate(self, configuration: Configuration) -> tuple[float, np.ndarray]:
+        if self._cache_version == configuration.version and self._cache is not None:
+            return self._cache
+        positions = configuration.frame_positions(self._frame_ids)  # (K, 3)
+        value = 0.0
+        gradient_frames = np.zeros_like(positions)  # dh/dX of each end frame, (K, 3)
+        views = 0
+        for view in self._active_views:
+            pixels, projection_jacobian, depth = view.camera.project_with_jacobian(positions)
+            if not (depth > 1e-6).all():
+                continue  # a segment end behind the camera: its projection means nothing
+            views += 1
+            view_value, pixel_gradient = _axis_value_and_pixel_gradient(
+                view.pixels, pixels, self._start_index, self._end_index, view.robust_scale_px
+            )
+            value += view_value
+            gradient_frames += np.einsum("ki,kij->kj", pixel_gradient, projection_jacobian)
+        if views == 0:
+            self._cache = (0.0, np.zeros(configuration.model.nv))
+        else:
+            jacobians = configuration.frame_translation_jacobians(self._frame_ids)  # (K, 3, nv)
+            gradient = np.einsum("kd,kdv->v", gradient_frames / views, jacobians)
+            self._cache = (value / views, gradient)
+        self._cache_version = configuration.version
+        return self._cache
+
+    def compute_value(self, configuration: Configuration) -> float:
+        return self._evaluate(configuration)[0]
+
+    def compute_gradient(self, configuration: Configuration) -> np.ndarray:
+        return self._evaluate(configuration)[1]
+
+
+def _axis_value_and_pixel_gradient(
+    samples: np.ndarray, end_pixels: np.ndarray, start_index: np.ndarray, end_index: np.ndarray, scale: float
+) -> tuple[float, np.ndarray]:
+    """h_axis of one view and its derivative with respect to the projected end frames.
+
+    Args:
+        samples: (N, 2) axis samples [px]; end_pixels: (K, 2) projected segment ends [px];
+        start_index, end_index: (S,) rows of end_pixels of each segment's ends; scale: c [px].
+
+    Returns:
+        The view's h_axis [px] and dh/d end_pixels, shape (K, 2).
+    """
+    starts, ends = end_pixels[start_index], end_pixels[end_index]  # (S, 2)
+    along = ends - starts
+    length_squared = np.maximum(np.einsum("si,si->s", along, along), 1e-12)
+    offsets = samples[:, None, :] - starts[None, :, :]  # (N, S, 2)
+    s = np.clip(np.einsum("nsi,si->ns", offsets, along) / length_squared, 0.0, 1.0)
+    residuals = offsets - s[:, :, None] * along[None, :, :]  # sample minus closest point
+    distance_squared = np.einsum("nsi,nsi->ns", residuals, residuals)
+    nearest = np.argmin(distance_squared, axis=1)
+    rows = np.arange(samples.shape[0])
+    s_near, residual = s[rows, nearest], residuals[rows, nearest]  # (N,), (N, 2)
+    weight = np.exp(-distance_squared[rows, nearest] / scale**2)
+    count = samples.shape[0]
+    value = -0.5 * scale * float(np.mean(1.0 - weight))
+    # d(-c/2 (1 - w))/d p = (w / c) r for the closest point p; p = (1 - s) a + s b.
+    pull = (weight / (scale * count))[:, None] * residual
+    gradient = np.zeros_like(end_pixels)
+    np.add.at(gradient, start_index[nearest], (1.0 - s_near)[:, None] * pull)
+    np.add.at(gradient, end_index[nearest], s_near[:, None] * pull)
+    return value, gradient

@@ -1,0 +1,111 @@
+"""Tests of the medial axis of a silhouette and of the silhouette-axis criterion."""
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from ibik_pin.configuration import Configuration
+from ibik_pin.exceptions import InputError
+from ibik_pin.tasks import ImageTask, View
+from ibik_pin.tasks.silhouette_axis import AxisView, SilhouetteAxisTask
+from ibik_pin.tasks.weighted_sum import WeightedSum
+from ibik_pin.vision.camera import look_at_camera
+from ibik_pin.vision.medial_axis import medial_axis_pixels
+from ibik_pin.vision.render import render_capsules
+from ibik_pin.vision.support import support_from_mask
+from tests.conftest import random_human_configuration
+
+
+def central_difference_gradient(task, model, q, eps=1e-6):
+    gradient = np.zeros(model.nv)
+    for k in range(model.nv):
+        dv = np.zeros(model.nv)
+        dv[k] = eps
+        plus = task.compute_value(Configuration(model, pin.integrate(model, q, dv)))
+        minus = task.compute_value(Configuration(model, pin.integrate(model, q, -dv)))
+        gradient[k] = (plus - minus) / (2 * eps)
+    return gradient
+
+
+def test_the_medial_axis_of_a_bar_is_its_centre_line():
+    mask = np.zeros((60, 100), bool)
+    mask[20:31, 10:90] = True  # rows 20..30: centre row 25
+    pixels = medial_axis_pixels(mask, min_depth_px=2.0, spacing_px=1)
+    assert len(pixels) > 50
+    middle = pixels[(pixels[:, 0] > 20) & (pixels[:, 0] < 80)]
+    assert np.all(np.abs(middle[:, 1] - 25.0) <= 0.5)
+
+
+def test_the_medial_axis_of_an_empty_mask_is_empty_and_bad_masks_are_refused():
+    assert medial_axis_pixels(np.zeros((10, 10), bool)).shape == (0, 2)
+    with pytest.raises(InputError, match="expected a 2D"):
+        medial_axis_pixels(np.zeros((4, 4, 3)))
+    with pytest.raises(InputError, match="spacing_px"):
+        medial_axis_pixels(np.ones((4, 4)), spacing_px=0)
+
+
+def test_the_medial_axis_is_thinned_and_capped():
+    mask = np.zeros((200, 200), bool)
+    mask[50:150, 50:150] = True
+    assert len(medial_axis_pixels(mask, spacing_px=1, max_points=40)) == 40
+    dense = medial_axis_pixels(mask, spacing_px=1, max_points=10_000)
+    sparse = medial_axis_pixels(mask, spacing_px=4, max_points=10_000)
+    assert len(sparse) < len(dense) / 2
+
+
+def _axis_views(human, q, scale_px=6.0):
+    configuration = Configuration(human.model, q)
+    ends = configuration.frame_positions(human.segment_frame_ids.reshape(-1)).reshape(-1, 2, 3)
+    center = configuration.frame_position(human.frame_id("Hip"))
+    views = []
+    for name, eye in [("front", center + [3.5, 0.3, 0.5]), ("side", center + [0.4, 0.5, -3.8])]:
+        camera = look_at_camera(name, (320, 240), 300.0, eye, center, np.array([0.0, 1.0, 0.0]))
+        mask = render_capsules(camera, ends[:, 0], ends[:, 1], human.segment_radii)
+        views.append((camera, mask, AxisView(camera, medial_axis_pixels(mask), scale_px)))
+    return views
+
+
+def test_the_axis_gradient_matches_finite_differences_on_the_human_with_two_cameras(human, rng):
+    silhouette_q = random_human_configuration(human, rng, spread=0.3)
+    q = random_human_configuration(human, rng, spread=0.3)
+    q[:7] = silhouette_q[:7]
+    task = SilhouetteAxisTask(human, [view for _, _, view in _axis_views(human, silhouette_q)])
+    analytic = task.compute_gradient(Configuration(human.model, q))
+    # The criterion is piecewise smooth (a sample changes nearest segment, a closest point reaches a
+    # segment's end); a segment seen end-on (the hips from the side) packs those kinks close together,
+    # so the difference step must be small enough not to straddle one.
+    numeric = central_difference_gradient(task, human.model, q, eps=1e-7)
+    assert np.linalg.norm(analytic) > 0.0
+    assert np.linalg.norm(numeric - analytic) / np.linalg.norm(analytic) <= 1e-4
+
+
+def test_the_axis_criterion_is_highest_at_the_pose_that_made_the_silhouette(human, rng):
+    true_q = random_human_configuration(human, rng, spread=0.3)
+    task = SilhouetteAxisTask(human, [view for _, _, view in _axis_views(human, true_q)])
+    at_truth = task.compute_value(Configuration(human.model, true_q))
+    for _ in range(5):
+        other = random_human_configuration(human, rng, spread=0.3)
+        other[:7] = true_q[:7]
+        assert task.compute_value(Configuration(human.model, other)) < at_truth
+
+
+def test_the_weighted_sum_adds_values_and_gradients(human, rng):
+    silhouette_q = random_human_configuration(human, rng, spread=0.3)
+    q = random_human_configuration(human, rng, spread=0.3)
+    q[:7] = silhouette_q[:7]
+    views = _axis_views(human, silhouette_q)
+    image = ImageTask(human, [View(camera, support_from_mask(mask, inside_cap_px=4.0)) for camera, mask, _ in views])
+    axis = SilhouetteAxisTask(human, [view for _, _, view in views])
+    both = WeightedSum([image, axis], [1.0, 2.0])
+    configuration = Configuration(human.model, q)
+    assert both.compute_value(configuration) == pytest.approx(
+        image.compute_value(configuration) + 2.0 * axis.compute_value(configuration), rel=1e-12)
+    np.testing.assert_allclose(both.compute_gradient(configuration),
+                               image.compute_gradient(configuration) + 2.0 * axis.compute_gradient(configuration),
+                               rtol=1e-12, atol=1e-15)
+    axis.set_views([])
+    assert both.enabled and not axis.enabled
+    with pytest.raises(InputError, match="one weight per term"):
+        WeightedSum([image, axis], [1.0])
+    with pytest.raises(InputError, match="non-negative"):
+        WeightedSum([image], [-1.0])
