@@ -22,11 +22,16 @@ from ibik_pin.limits import JointLimits
 from ibik_pin.model import BodyModel
 from ibik_pin.solvers import make_solver
 from ibik_pin.tasks import FramePositionTask, ImageTask, PostureTask, View
+from ibik_pin.tasks.base import GradientTask
+from ibik_pin.tasks.silhouette_axis import AxisView, SilhouetteAxisTask
+from ibik_pin.tasks.weighted_sum import WeightedSum
+from ibik_pin.vision.medial_axis import medial_axis_pixels
 from ibik_pin.vision.segmentation import TemporalMajority
 from ibik_pin.vision.support import support_from_mask
 
 LOWER_BODY = {"Hip", "LHip", "RHip", "LKnee", "RKnee", "LAnkle", "RAnkle", "LBigToe", "LSmallToe",
               "LHeel", "RBigToe", "RSmallToe", "RHeel"}
+CRITERIA = ("paper", "two-way")
 LIMB_HALF_WIDTH = 0.04  # [m] the support's inside cap, in pixels at the subject's distance (DESIGN.md)
 
 # A frame's silhouettes: one (H, W) bool mask per camera, in the cameras' order.
@@ -52,6 +57,12 @@ class TrackingSettings:
         posture_weight: weight of the posture prior (lowest level).
         mask_filter_radius: with r > 0, each silhouette pixel is the majority over the 2r + 1
             frames around it (images.TemporalMajority), removing one-frame segmentation flicker.
+        criterion: "paper", the overlap of eq. (5)-(6) alone, or "two-way": that overlap plus
+            `axis_weight` times the silhouette-axis term (tasks.silhouette_axis), which asks the
+            skeleton to explain the silhouette's medial axis as well.
+        axis_weight: weight of the silhouette-axis term in the two-way criterion.
+        axis_scale: the axis term's robust scale [m] at the subject's distance: an axis sample
+            farther than about this from every projected segment stops pulling.
     """
 
     method: str = "qp"
@@ -63,6 +74,9 @@ class TrackingSettings:
     image_step: float = 0.05
     posture_weight: float = 1e-2
     mask_filter_radius: int = 0
+    criterion: str = "paper"
+    axis_weight: float = 1.0
+    axis_scale: float = 0.10
 
 
 @dataclass
@@ -121,11 +135,12 @@ def initial_configuration(body: BodyModel, names: list[str], targets: np.ndarray
     return q
 
 
-def support_caps(cameras: Sequence, subject_position: np.ndarray) -> list[float]:
-    """Inside cap [px] of each view's support: a limb's half width seen at the subject's distance."""
+def support_caps(cameras: Sequence, subject_position: np.ndarray, size: float = LIMB_HALF_WIDTH) -> list[float]:
+    """Inside cap [px] of each view's support: a limb's half width (or `size` [m]) seen at the
+    subject's distance, at least 1 px."""
     caps = []
     for camera in cameras:
-        radius = camera.pixel_radius(subject_position[None], np.array([LIMB_HALF_WIDTH]))
+        radius = camera.pixel_radius(subject_position[None], np.array([size]))
         caps.append(float(max(radius[0], 1.0)))
     return caps
 
@@ -149,6 +164,11 @@ def make_views(
             disabled.append(camera.name)
         views.append(View(camera, support))
     return views, disabled
+
+
+def axis_views(cameras: Sequence, masks: Sequence[np.ndarray], scales: Sequence[float]) -> list[AxisView]:
+    """One silhouette-axis view per camera: the medial axis of its mask, robust scale [px]."""
+    return [AxisView(camera, medial_axis_pixels(mask), scale) for camera, mask, scale in zip(cameras, masks, scales)]
 
 
 def solve_first_frame(
@@ -204,6 +224,14 @@ class Tracker:
         self.posture = PostureTask(model, weight=self.settings.posture_weight)
         self.image_task = ImageTask(body, (), samples_per_segment=self.settings.samples_per_segment,
                                     max_step_size=self.settings.image_step)
+        if self.settings.criterion not in CRITERIA:
+            raise InputError(f"criterion: expected one of {', '.join(CRITERIA)}, found {self.settings.criterion!r}")
+        self.axis_task = SilhouetteAxisTask(body, max_step_size=self.settings.image_step)
+        # The gradient task of the image level: the paper's overlap, or the two-way sum.
+        self.image_criterion: GradientTask = self.image_task
+        if self.settings.criterion == "two-way":
+            self.image_criterion = WeightedSum([self.image_task, self.axis_task], [1.0, self.settings.axis_weight],
+                                               max_step_size=self.settings.image_step)
         self._target_tasks: dict[str, FramePositionTask] = {}
 
     def _levels(self, names: list[str]) -> list[list]:
@@ -214,7 +242,7 @@ class Tracker:
         upper = [self._target_tasks[n] for n in names if n not in LOWER_BODY]
         levels = [lower, upper]
         if self.settings.use_image and self.cameras:
-            levels.append([self.image_task])
+            levels.append([self.image_criterion])
         levels.append([self.posture])
         return levels
 
@@ -260,6 +288,7 @@ class Tracker:
         )
         configuration = Configuration(self.body.model, initial_configuration(self.body, names, targets[0]))
         caps = support_caps(self.cameras, configuration.q[:3]) if use_image else []
+        axis_scales = support_caps(self.cameras, configuration.q[:3], self.settings.axis_scale) if use_image else []
         for frame in range(frame_count):
             present = np.all(np.isfinite(targets[frame]), axis=1)
             for k, name in enumerate(names):
@@ -267,15 +296,18 @@ class Tracker:
             result.dropped_targets.append([n for n, p in zip(names, present) if not p])
             disabled = []
             if use_image:
-                views, disabled = make_views(self.cameras, silhouettes(frame), caps)
+                masks = silhouettes(frame)
+                views, disabled = make_views(self.cameras, masks, caps)
                 with warnings.catch_warnings():  # empty views are reported per frame instead
                     warnings.simplefilter("ignore", EmptySilhouetteWarning)
                     self.image_task.set_views(views)
+                    if self.settings.criterion == "two-way":
+                        self.axis_task.set_views(axis_views(self.cameras, masks, axis_scales))
             result.disabled_views.append(disabled)
             started = time.perf_counter()
             if frame == 0:
                 solve_first_frame(self.solver, configuration, levels,
-                                  self.image_task if use_image else None,
+                                  self.image_criterion if use_image else None,
                                   self.settings.first_frame_iterations, self.settings.first_frame_starts)
             else:
                 self.solver.solve(configuration, levels, iterations=self.settings.iterations)
