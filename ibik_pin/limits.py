@@ -33,7 +33,7 @@ class JointLimits:
         self.model = model
         q_index, v_index, names = [], [], []
         step = np.full(model.nv, float(max_step))
-        for joint, name in zip(model.joints[1:], model.names[1:]):
+        for joint, name in zip(model.joints[1:], model.names[1:], strict=True):
             if joint.shortname() == "JointModelFreeFlyer":
                 step[joint.idx_v : joint.idx_v + 3] = max_root_translation
             elif joint.nq == 1 and joint.nv == 1:
@@ -80,4 +80,4 @@ class JointLimits:
         """Names of the joints within `tolerance` of a limit."""
         q_limited = q[self.q_index]
         hit = (q_limited - self.lower < tolerance) | (self.upper - q_limited < tolerance)
-        return [name for name, is_hit in zip(self.joint_names, hit) if is_hit]
+        return [name for name, is_hit in zip(self.joint_names, hit, strict=True) if is_hit]

@@ -8,8 +8,9 @@ keypoint pairs are the segments projected into the images (eq. 5), and how thick
 from __future__ import annotations
 
 import sys
-from importlib import resources
 from dataclasses import dataclass, field
+from importlib import resources
+from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
@@ -198,7 +199,7 @@ def load_planar_chain() -> BodyModel:
     return BodyModel(
         model=model,
         keypoints=keypoints,
-        segments=list(zip(names[:-1], names[1:])),
+        segments=list(pairwise(names)),
         segment_radii=np.full(4, 0.02),
         end_effectors=["end_effector"],
     )

@@ -6,9 +6,9 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: see ibik_pin/__init__.py
 
-import numpy as np  # noqa: E402
-import pinocchio as pin  # noqa: E402
-import pytest  # noqa: E402
+import numpy as np
+import pinocchio as pin
+import pytest
 
 from ibik_pin.limits import JointLimits
 from ibik_pin.model import load_human

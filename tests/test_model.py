@@ -49,7 +49,7 @@ def test_the_human_stands_about_1_75_m_tall(human):
 
 
 @pytest.mark.parametrize(
-    "loader, nq, end", [(load_planar_chain, 4, "end_effector"), (load_arm, 6, "Wrist"), (load_leg, 6, "Ankle")]
+    ("loader", "nq", "end"), [(load_planar_chain, 4, "end_effector"), (load_arm, 6, "Wrist"), (load_leg, 6, "Ankle")]
 )
 def test_project_models_load_with_their_end_effector(loader, nq, end):
     body = loader()
@@ -78,7 +78,7 @@ def test_a_missing_urdf_is_a_file_format_error(tmp_path):
 def test_a_broken_urdf_is_a_file_format_error(tmp_path):
     path = tmp_path / "broken.urdf"
     path.write_text("<robot name='x'><link name='a'/><joint name='j' type='revolute'>")
-    with pytest.raises(IbikError, match="broken.urdf"):
+    with pytest.raises(IbikError, match=r"broken\.urdf"):
         load_urdf(path)
 
 

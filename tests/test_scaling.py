@@ -60,7 +60,7 @@ def test_scaling_leaves_the_input_model_untouched(human, rng):
 
 def test_the_model_s_own_lengths_give_the_model_back(human):
     scaled = scale_human(human, keypoint_lengths(human))
-    for before, after in zip(placements(human), placements(scaled)):
+    for before, after in zip(placements(human), placements(scaled), strict=True):
         assert np.allclose(before, after, atol=1e-12)
 
 
@@ -136,7 +136,7 @@ def test_the_scaled_model_keeps_its_joint_axes_and_limits(human, rng):
 
 
 def test_an_unknown_length_name_lists_the_known_ones(human):
-    with pytest.raises(UnknownNameError, match="unknown length name.*'femur'.*known: left_thigh"):
+    with pytest.raises(UnknownNameError, match=r"unknown length name.*'femur'.*known: left_thigh"):
         scale_human(human, {"femur": 0.4})
 
 
