@@ -1,5 +1,5 @@
-"""Tests of ibik_pin.io.bvh (and of the SkeletonMotion it returns): write, read, forward
-kinematics, real files, malformed files."""
+"""Tests of ibik_pin.io.bvh, bvh_hierarchy and bvh_writer (and of the SkeletonMotion they
+return): write, read, forward kinematics, real files, malformed files."""
 
 import itertools
 import re
@@ -13,7 +13,8 @@ from ibik_pin.exceptions import (
     InputError,
     UnknownNameError,
 )
-from ibik_pin.io.bvh import CMU_BVH_SCALE, read_bvh, write_bvh
+from ibik_pin.io.bvh import CMU_BVH_SCALE, read_bvh
+from ibik_pin.io.bvh_writer import write_bvh
 from tests.paths import SHARED_DATA, TEST_DATA
 
 SHARED_BVH = SHARED_DATA / "bvh"

@@ -24,9 +24,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ibik_pin.exceptions import FileFormatError, InputError
-from ibik_pin.io.euler import euler_to_matrices
 from ibik_pin.io.files import is_number, read_text
-from ibik_pin.io.skeleton import SkeletonMotion
+from ibik_pin.io.skeleton import SkeletonMotion, axis_rotations
 
 _ROTATION_DOFS = ("rx", "ry", "rz")
 _TRANSLATION_DOFS = ("tx", "ty", "tz")
@@ -94,10 +93,11 @@ def read_asf_amc(
 
     root_rest = _rest_rotation(skeleton.root_orientation * to_radians, skeleton.root_axis)
     rotation_columns = [c for c, dof in enumerate(skeleton.root_order) if dof.startswith("r")]
-    root_motion = euler_to_matrices(
+    # The dof names' lower-case axis letters make axis_rotations turn about the fixed axes,
+    # Acclaim's convention (see the module docstring).
+    root_motion = axis_rotations(
         root_values[:, rotation_columns] * to_radians,
         "".join(skeleton.root_order[c][1] for c in rotation_columns),
-        intrinsic=False,
     )
     translations = np.zeros((frame_count, 3))
     for column, dof in enumerate(skeleton.root_order):
@@ -116,9 +116,7 @@ def read_asf_amc(
         parent = index_of[bone.parent]
         parents.append(parent)
         rest = _rest_rotation(bone.axis_angles * to_radians, bone.axis_order)
-        motion = euler_to_matrices(
-            dof_values[name] * to_radians, "".join(dof[1] for dof in bone.dofs), intrinsic=False
-        )
+        motion = axis_rotations(dof_values[name] * to_radians, "".join(dof[1] for dof in bone.dofs))
         rotations[:, index] = rotations[:, parent] @ rest @ motion @ rest.T
         positions[:, index] = positions[:, parent] + bone.length * (
             rotations[:, index] @ bone.direction
@@ -388,9 +386,8 @@ def _check_frame(
 def _rest_rotation(angles_xyz: np.ndarray, order: str) -> np.ndarray:
     """The rest frame C of a bone or the root, shape (3, 3), from its angles about X, Y and Z
     [rad], shape (3,), applied in ``order`` about the fixed axes."""
-    return euler_to_matrices(
-        angles_xyz[["XYZ".index(axis) for axis in order]], order, intrinsic=False
-    )
+    angles = angles_xyz[["XYZ".index(axis) for axis in order]]
+    return axis_rotations(angles[np.newaxis], order.lower())[0]
 
 
 def _words(line: str) -> list[str]:

@@ -14,12 +14,13 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
+from scipy.spatial.transform import Rotation
 
 from ibik_pin.exceptions import InputError
-from ibik_pin.io.bvh import write_bvh
-from ibik_pin.io.euler import matrices_to_euler
+from ibik_pin.io.bvh_writer import write_bvh
 from ibik_pin.io.files import write_text_atomically
 from ibik_pin.io.mot import write_mot
+from ibik_pin.io.skeleton import euler_angles
 from ibik_pin.model import BodyModel
 
 __all__ = [
@@ -164,8 +165,9 @@ def write_model_mot(
         kind = _joint_kind(model, joint_id)
         first = model.joints[joint_id].idx_q
         if kind == "free_flyer":
-            rotations = _quaternions_to_matrices(q[:, first + 3 : first + 7])
-            angles = np.rad2deg(matrices_to_euler(rotations, ROOT_EULER_AXES))
+            # Pinocchio's and scipy's quaternions are both in (x, y, z, w) order.
+            rotations = Rotation.from_quat(q[:, first + 3 : first + 7]).as_matrix()
+            angles = np.rad2deg(euler_angles(rotations, ROOT_EULER_AXES))
             column_names += _ROOT_MOT_COLUMNS
             columns += [q[:, first + 0], q[:, first + 1], q[:, first + 2]]
             columns += list(np.unwrap(angles, period=360.0, axis=0).T)
@@ -334,7 +336,7 @@ def _end_sites(body: BodyModel, groups: list[BvhJointGroup]) -> dict[int, np.nda
 def _group_name(joint_names: list[str]) -> str:
     """The ``_``-separated tokens the names share, without a trailing axis letter or "joint"."""
     shared: list[str] = []
-    for tokens in zip(*(name.split("_") for name in joint_names)):
+    for tokens in zip(*(name.split("_") for name in joint_names), strict=False):
         if len(set(tokens)) != 1:
             break
         shared.append(tokens[0])
@@ -398,16 +400,3 @@ def _check_motion(
             f"got shape {times.shape}"
         )
     return times, q
-
-
-def _quaternions_to_matrices(quaternions: np.ndarray) -> np.ndarray:
-    """Rotation matrices (F, 3, 3) of unit quaternions (F, 4) in Pinocchio's order (x, y, z, w)."""
-    x, y, z, w = quaternions.T
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-        ],
-        -2,
-    )

@@ -7,7 +7,7 @@ import uuid
 import warnings
 from collections.abc import Callable
 from pathlib import Path
-from typing import TypeVar, Union
+from typing import TypeVar
 
 from ibik_pin.exceptions import (
     FileFormatError,
@@ -15,7 +15,7 @@ from ibik_pin.exceptions import (
     InputError,
 )
 
-PathLike = Union[str, os.PathLike]
+PathLike = str | os.PathLike
 
 
 _Result = TypeVar("_Result")

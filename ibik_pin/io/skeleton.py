@@ -1,16 +1,71 @@
 """Motion of a marker-less skeleton read from a motion-capture file (ASF/AMC, BVH).
+
+Both readers build each joint's rotation from angles about coordinate axes, in an order the file
+states; :func:`axis_rotations` is that one conversion, and :class:`SkeletonMotion` what both
+return.
 """
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from ibik_pin.exceptions import (
     InputError,
     UnknownNameError,
 )
+
+__all__ = ["SkeletonMotion", "axis_rotations", "euler_angles"]
+
+
+def axis_rotations(angles: np.ndarray, axes: str) -> np.ndarray:
+    """Rotation matrices of successive rotations about coordinate axes, vectorised over frames.
+
+    The letters follow scipy's convention: upper case for rotations about the moving axes
+    (intrinsic: ``"ZXY"`` gives R = R_z(a) @ R_x(b) @ R_y(c), BVH's channels), lower case for
+    rotations about the fixed axes (extrinsic: ``"zxy"`` gives R = R_y(c) @ R_x(b) @ R_z(a),
+    Acclaim's dofs).
+
+    Args:
+        angles: Angles, shape (F, n) [rad], n = len(axes).
+        axes: Up to three letters among "XYZ" (intrinsic) or "xyz" (extrinsic), no two
+            neighbours alike; an empty string (a joint without rotation) gives the identity.
+
+    Returns:
+        Rotation matrices, shape (F, 3, 3).
+    """
+    angles = np.asarray(angles, dtype=float)
+    if not axes:
+        return np.repeat(np.eye(3)[np.newaxis], angles.shape[0], axis=0)
+    return Rotation.from_euler(axes, angles).as_matrix()
+
+
+def euler_angles(rotations: np.ndarray, axes: str) -> np.ndarray:
+    """Intrinsic Euler angles of rotation matrices, the inverse of :func:`axis_rotations`.
+
+    For ``axes = "ZXY"`` it returns (a, b, c) with R = R_z(a) @ R_x(b) @ R_y(c), a, c in
+    [-pi, pi] and b in [-pi/2, pi/2]. At gimbal lock (b = +-pi/2) only a + c or a - c is
+    defined: c is then 0 and a carries the whole turn, so the angles still rebuild the matrix to
+    rounding error.
+
+    Args:
+        rotations: Rotation matrices, shape (..., 3, 3).
+        axes: Three distinct letters among "XYZ".
+
+    Returns:
+        Angles, shape (..., 3) [rad].
+    """
+    with warnings.catch_warnings():
+        # scipy warns at gimbal lock that it sets the third angle to zero: that is the choice
+        # documented above, not a loss, so the user is not told.
+        warnings.filterwarnings("ignore", "Gimbal lock", UserWarning)
+        # Flattened to one batch dimension: scipy before 1.17 takes no more.
+        rotations = np.asarray(rotations, dtype=float)
+        angles = Rotation.from_matrix(rotations.reshape(-1, 3, 3)).as_euler(axes)
+    return angles.reshape(*rotations.shape[:-2], 3)
 
 
 @dataclass
