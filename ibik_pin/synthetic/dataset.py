@@ -1,12 +1,18 @@
-"""A synthetic recording written as the files `ibik track` reads.
+"""A synthetic recording written as the files `ibik track` reads, with its truth beside them.
+
+The data set holds a Pose2Sim calibration TOML, TRC files of the target keypoints (with noise)
+and of every keypoint (the truth), the true configurations, one folder of masks per camera
+(rendered silhouettes, optionally degraded) and a JSON of the parameters. Pose2Sim's calibration
+world is Z up while its TRC files, like the model frame, are Y up: the cameras are written in the
+Z-up world (:data:`~ibik_pin.io.calibration.POSE2SIM_TRC_TO_WORLD`), the keypoints Y up.
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Sequence
 
 import cv2
 import numpy as np
@@ -16,13 +22,10 @@ from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, write_calibration
 from ibik_pin.io.trc import TrcData, write_trc
 from ibik_pin.model import BodyModel
 from ibik_pin.synthetic.defects import SilhouetteDefects, apply_defects
-from ibik_pin.synthetic.rig import _replace_rotation
-from ibik_pin.synthetic.silhouettes import (
-    _keypoint_positions,
-    render_limb_masks,
-    render_silhouettes,
-)
+from ibik_pin.synthetic.silhouettes import keypoint_positions, render_limb_masks, render_silhouettes
 from ibik_pin.vision.camera import PinholeCamera
+
+__all__ = ["DatasetPaths", "write_dataset"]
 
 
 @dataclass(frozen=True)
@@ -46,7 +49,6 @@ class DatasetPaths:
     truth_q: Path
     masks: Path
     metadata: Path
-
 
 
 def write_dataset(
@@ -120,15 +122,11 @@ def write_dataset(
         masks=folder / "masks",
         metadata=folder / "dataset.json",
     )
-    # Pose2Sim's calibration world is Z up: world = M @ model frame, so R_world = R_model @ M^T.
-    write_calibration(
-        paths.calibration,
-        [_replace_rotation(camera, camera.rotation @ POSE2SIM_TRC_TO_WORLD.T) for camera in cameras],
-    )
+    write_calibration(paths.calibration, [_in_pose2sim_world(camera) for camera in cameras])
 
     keypoints = list(body.keypoints)
     truth = np.array([[points[name] for name in keypoints]
-                      for points in (_keypoint_positions(body, q_frame) for q_frame in q)])
+                      for points in (keypoint_positions(body, q_frame) for q_frame in q)])
     frame_count = q.shape[0]
     times = np.arange(frame_count) / frame_rate
     frame_numbers = np.arange(1, frame_count + 1)
@@ -146,7 +144,7 @@ def write_dataset(
     lose_limbs = defects is not None and defects.missing_limb_probability > 0.0
     for frame, q_frame in enumerate(q):
         masks = render_silhouettes(body, q_frame, cameras)
-        for camera, camera_folder, mask in zip(cameras, folders, masks):
+        for camera, camera_folder, mask in zip(cameras, folders, masks, strict=True):
             if defects is not None:
                 limbs = render_limb_masks(body, q_frame, camera) if lose_limbs else None
                 mask = apply_defects(mask, defects, defect_rng, limbs)
@@ -168,3 +166,15 @@ def write_dataset(
     }
     paths.metadata.write_text(json.dumps(metadata, indent=2) + "\n")
     return paths
+
+
+def _in_pose2sim_world(camera: PinholeCamera) -> PinholeCamera:
+    """The camera of model-frame points (Y up) as a camera of Pose2Sim's Z-up world points."""
+    if not isinstance(camera, PinholeCamera):
+        raise InputError(
+            f"cameras: expected PinholeCamera (a calibration TOML holds no other kind), got {type(camera).__name__}"
+        )
+    # world = M @ model frame, so R_world = R_model @ M^T maps each world point to the camera
+    # coordinates of its model-frame point: the translation stays.
+    rotation = camera.rotation @ POSE2SIM_TRC_TO_WORLD.T
+    return PinholeCamera(camera.name, camera.size, camera.intrinsics, camera.distortion, rotation, camera.translation)

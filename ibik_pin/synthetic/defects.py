@@ -3,13 +3,15 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import cv2
 import numpy as np
 
 from ibik_pin.exceptions import InputError
+
+__all__ = ["SilhouetteDefects", "apply_defects"]
 
 
 @dataclass(frozen=True)
@@ -56,10 +58,8 @@ class SilhouetteDefects:
                 raise InputError(f"{name}: expected a probability in [0, 1], got {value}")
 
 
-
 def _disc_kernel(radius: int) -> np.ndarray:
     return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
-
 
 
 def apply_defects(

@@ -1,13 +1,19 @@
 """Real motion capture as Pose2Sim keypoints, and the human model posed to them.
+
+The joints of a motion read by :mod:`ibik_pin.io` (CMU ASF/AMC, CMU's BVH conversions,
+Boxing_Toes.bvh) are mapped to the Pose2Sim keypoints the model carries and turned to face +X;
+the model is then fitted to them frame by frame by the hierarchical QP. The fitted configurations
+are the ground truth of a synthetic data set (:mod:`ibik_pin.synthetic.dataset`).
 """
 
 from __future__ import annotations
 
 import warnings
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import pinocchio as pin
+from scipy.spatial.transform import Rotation
 
 from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError, UnknownNameError
@@ -17,104 +23,60 @@ from ibik_pin.model import BodyModel
 from ibik_pin.solvers import make_solver
 from ibik_pin.tasks import FramePositionTask, PostureTask
 
+__all__ = ["KEYPOINT_SOURCES", "UP", "facing_directions", "keypoints_from_motion", "pose_model_to_keypoints"]
+
+#: The vertical axis of the model frame and of the motion capture sources: Y up.
 UP = np.array([0.0, 1.0, 0.0])
-
-
-
-# Pose2Sim keypoint -> joint of each source, left side; the right side swaps the prefixes.
-# CMU ASF/AMC: a joint is the END point of the bone of that name (ibik_pin.io.asf_amc), so
-# "lfemur" is the knee. The forearm is two bones, lradius then lwrist: the wrist is lwrist's end.
-# The neck is the end of lowerneck (4 cm above the shoulders for subject 35); thorax's end, at the
-# base of the neck, lies below the shoulders, far from the model's Neck (0.15 m above them).
-# "head" ends at the top of the head. CMU has no heel.
-_ASF = {
-    "Hip": "root",
-    "LHip": "lhipjoint",
-    "LKnee": "lfemur",
-    "LAnkle": "ltibia",
-    "LBigToe": "ltoes",
-    "Neck": "lowerneck",
-    "Head": "head",
-    "LShoulder": "lclavicle",
-    "LElbow": "lhumerus",
-    "LWrist": "lwrist",
-}
-
-
-
-# CMU BVH (cgspeed): a joint is the START of its bone. Two namings exist; 131_01.bvh's:
-_CMU_BVH_131 = {
-    "Hip": "Hips",
-    "LHip": "LeftHip",
-    "LKnee": "LeftKnee",
-    "LAnkle": "LeftAnkle",
-    "LBigToe": "LeftToe_end",
-    "Neck": "Neck",  # lowerneck's end ("lowerneck" is the base of the neck, thorax's end)
-    "Head": "Head_end",
-    "LShoulder": "LeftShoulder",  # the clavicle's end ("LeftCollar" is its start)
-    "LElbow": "LeftElbow",
-    "LWrist": "LeftWrist",
-}
-
-
-
-# ... and 01_01.bvh's (MotionBuilder names):
-_CMU_BVH_01 = {
-    "Hip": "Hips",
-    "LHip": "LeftUpLeg",
-    "LKnee": "LeftLeg",
-    "LAnkle": "LeftFoot",
-    "LBigToe": "LeftToeBase_end",
-    "Neck": "Neck1",  # lowerneck's end ("Neck" is the base of the neck)
-    "Head": "Head_end",
-    "LShoulder": "LeftArm",  # the clavicle's end ("LeftShoulder" is its start)
-    "LElbow": "LeftForeArm",
-    "LWrist": "LeftHand",
-}
-
-
-
-# Boxing_Toes.bvh (assimp test model): Hips is at the hip joints' level; Neck at the shoulders'.
-_BOXING = {
-    "Hip": "Hips",
-    "LHip": "LeftHip",
-    "LKnee": "LeftKnee",
-    "LAnkle": "LeftAnkle",
-    "LBigToe": "LeftToes_end",
-    "Neck": "Neck",
-    "Head": "Head_end",
-    "LShoulder": "LeftShoulder",
-    "LElbow": "LeftElbow",
-    "LWrist": "LeftWrist",
-}
-
-
 
 #: The sources :func:`keypoints_from_motion` knows.
 KEYPOINT_SOURCES = ("asf", "cmu_bvh", "boxing")
 
+# Pose2Sim keypoint -> joint of each source, left side; the right side swaps the prefixes.
+# Columns: CMU ASF/AMC; CMU BVH (cgspeed), which comes in two namings, 131_01.bvh's and
+# 01_01.bvh's (MotionBuilder names); Boxing_Toes.bvh (assimp test model).
+# - CMU ASF/AMC: a joint is the END point of the bone of that name (ibik_pin.io.asf_amc), so
+#   "lfemur" is the knee. The forearm is two bones, lradius then lwrist: the wrist is lwrist's
+#   end. The neck is the end of lowerneck (4 cm above the shoulders for subject 35); thorax's end,
+#   at the base of the neck, lies below the shoulders, far from the model's Neck (0.15 m above
+#   them). "head" ends at the top of the head. CMU has no heel.
+# - CMU BVH: a joint is the START of its bone. The Neck is lowerneck's end (131_01's "Neck",
+#   01_01's "Neck1": 01_01's "Neck" is the base of the neck); the shoulder is the clavicle's end
+#   (131_01's "LeftShoulder", 01_01's "LeftArm"; "LeftCollar" and "LeftShoulder" are its start).
+# - Boxing_Toes.bvh: Hips is at the hip joints' level; Neck at the shoulders'.
+_LEFT_JOINTS = {
+    # keypoint: (asf, cmu_bvh 131_01, cmu_bvh 01_01, boxing)
+    "Hip": ("root", "Hips", "Hips", "Hips"),
+    "LHip": ("lhipjoint", "LeftHip", "LeftUpLeg", "LeftHip"),
+    "LKnee": ("lfemur", "LeftKnee", "LeftLeg", "LeftKnee"),
+    "LAnkle": ("ltibia", "LeftAnkle", "LeftFoot", "LeftAnkle"),
+    "LBigToe": ("ltoes", "LeftToe_end", "LeftToeBase_end", "LeftToes_end"),
+    "Neck": ("lowerneck", "Neck", "Neck1", "Neck"),
+    "Head": ("head", "Head_end", "Head_end", "Head_end"),
+    "LShoulder": ("lclavicle", "LeftShoulder", "LeftArm", "LeftShoulder"),
+    "LElbow": ("lhumerus", "LeftElbow", "LeftForeArm", "LeftElbow"),
+    "LWrist": ("lwrist", "LeftWrist", "LeftHand", "LeftWrist"),
+}
 
 
-def _both_sides(left_table: dict[str, str], left: str, right: str) -> dict[str, str]:
+def _both_sides(column: int, left: str, right: str) -> dict[str, str]:
+    """Keypoint -> joint of one column of :data:`_LEFT_JOINTS`, the right side added."""
     table = {}
-    for keypoint, joint in left_table.items():
+    for keypoint, joints in _LEFT_JOINTS.items():
+        joint = joints[column]
         table[keypoint] = joint
         if keypoint.startswith("L"):
             table["R" + keypoint[1:]] = right + joint[len(left):] if joint.startswith(left) else joint
     return table
 
 
-
 def _source_table(motion: SkeletonMotion, source: str) -> dict[str, str]:
     if source == "asf":
-        return _both_sides(_ASF, "l", "r")
+        return _both_sides(0, "l", "r")
     if source == "cmu_bvh":
-        table = _CMU_BVH_01 if "LeftUpLeg" in motion.names else _CMU_BVH_131
-        return _both_sides(table, "Left", "Right")
+        return _both_sides(2 if "LeftUpLeg" in motion.names else 1, "Left", "Right")
     if source == "boxing":
-        return _both_sides(_BOXING, "Left", "Right")
+        return _both_sides(3, "Left", "Right")
     raise UnknownNameError(f"source: unknown source {source!r}; known: {', '.join(KEYPOINT_SOURCES)}")
-
 
 
 def keypoints_from_motion(motion: SkeletonMotion, source: str) -> tuple[list[str], np.ndarray]:
@@ -156,7 +118,6 @@ def keypoints_from_motion(motion: SkeletonMotion, source: str) -> tuple[list[str
     return names, positions @ rotation.T
 
 
-
 def facing_directions(names: Sequence[str], positions: np.ndarray) -> np.ndarray:
     """Horizontal unit direction the subject faces, from its left-right axis, per frame.
 
@@ -185,18 +146,6 @@ def facing_directions(names: Sequence[str], positions: np.ndarray) -> np.ndarray
     forward[:, 1] = 0.0
     with np.errstate(invalid="ignore", divide="ignore"):
         return forward / np.linalg.norm(forward, axis=1, keepdims=True)
-
-
-
-def _kabsch(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rotation R (3, 3) and translation t (3,) minimising |R source + t - target| (rows)."""
-    source_mean, target_mean = source.mean(axis=0), target.mean(axis=0)
-    covariance = (target - target_mean).T @ (source - source_mean)
-    u, _, vt = np.linalg.svd(covariance)
-    sign = np.sign(np.linalg.det(u @ vt))
-    rotation = u @ np.diag([1.0, 1.0, sign]) @ vt
-    return rotation, target_mean - rotation @ source_mean
-
 
 
 def pose_model_to_keypoints(
@@ -251,9 +200,11 @@ def pose_model_to_keypoints(
     if present.sum() < 3:
         raise InputError(f"positions: expected at least 3 keypoints in the first frame, got {int(present.sum())}")
     neutral_points = configuration.frame_positions(frame_ids)[present]
-    rotation, translation = _kabsch(neutral_points, positions[0, present])
+    # The rigid motion best moving the neutral keypoints onto the first frame's (Kabsch).
+    neutral_mean, target_mean = neutral_points.mean(axis=0), positions[0, present].mean(axis=0)
+    rotation = Rotation.align_vectors(positions[0, present] - target_mean, neutral_points - neutral_mean)[0]
     q = pin.neutral(model)
-    placement = pin.SE3(rotation, translation)
+    placement = pin.SE3(rotation.as_matrix(), target_mean - rotation.apply(neutral_mean))
     if model.joints[1].shortname() == "JointModelFreeFlyer":
         q[:7] = pin.SE3ToXYZQUAT(placement)
     configuration.update(q)
@@ -261,7 +212,7 @@ def pose_model_to_keypoints(
     q_all = np.empty((positions.shape[0], model.nq))
     residuals = np.empty(positions.shape[0])
     for frame, targets in enumerate(positions):
-        for task, target in zip(tasks, targets):
+        for task, target in zip(tasks, targets, strict=True):
             task.set_target(target if np.all(np.isfinite(target)) else None)
         solver.solve(configuration, levels, iterations=first_iterations if frame == 0 else iterations)
         q_all[frame] = configuration.q

@@ -13,16 +13,24 @@ from ibik_pin.vision.camera import OrthographicCamera
 from ibik_pin.vision.render import render_capsules
 from ibik_pin.vision.support import SupportImage, obstacle_support, support_from_mask
 
-IMAGE_SIZE = (400, 400)  # [px]
+__all__ = [
+    "CHAIN_LENGTH",
+    "IMAGE_SIZE",
+    "PIXELS_PER_METRE",
+    "PlanarScene",
+    "make_scene",
+    "planar_camera",
+    "render_chain",
+    "square_mask",
+]
 
+IMAGE_SIZE = (400, 400)  # [px]
 
 
 PIXELS_PER_METRE = 150.0
 
 
-
 CHAIN_LENGTH = 1.0  # [m], 4 segments of 0.25 m
-
 
 
 def planar_camera() -> OrthographicCamera:
@@ -35,7 +43,6 @@ def planar_camera() -> OrthographicCamera:
         scale=PIXELS_PER_METRE,
         principal_point=np.array([IMAGE_SIZE[0] / 2, IMAGE_SIZE[1] / 2]),
     )
-
 
 
 @dataclass
@@ -64,13 +71,11 @@ class PlanarScene:
         return configuration.frame_positions(self.body.frame_ids(list(self.body.keypoints)))
 
 
-
 def render_chain(body: BodyModel, camera, q: np.ndarray) -> np.ndarray:
     """Silhouette (H, W) bool of the chain at q, capsules of the body's segment radii."""
     configuration = Configuration(body.model, q)
     ends = configuration.frame_positions(body.segment_frame_ids.reshape(-1)).reshape(-1, 2, 3)
     return render_capsules(camera, ends[:, 0], ends[:, 1], body.segment_radii)
-
 
 
 def square_mask(center_world: np.ndarray, half_side: float, camera) -> np.ndarray:
@@ -84,7 +89,6 @@ def square_mask(center_world: np.ndarray, half_side: float, camera) -> np.ndarra
     mask = np.zeros((height, width), dtype=bool)
     mask[max(v0, 0) : max(v1, 0), max(u0, 0) : max(u1, 0)] = True
     return mask
-
 
 
 def make_scene(

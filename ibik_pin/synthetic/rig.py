@@ -1,4 +1,5 @@
-"""Camera rigs around a subject, as in HumanEva.
+"""Camera rigs around a subject, as in HumanEva: pinhole cameras on a horizontal circle, each
+looking at the subject's centre, with seeded azimuths.
 """
 
 from __future__ import annotations
@@ -8,6 +9,8 @@ import numpy as np
 from ibik_pin.exceptions import InputError
 from ibik_pin.synthetic.mocap import UP
 from ibik_pin.vision.camera import PinholeCamera, look_at_camera
+
+__all__ = ["humaneva_rig"]
 
 
 def humaneva_rig(
@@ -61,12 +64,3 @@ def humaneva_rig(
         eye[1] = height_m
         cameras.append(look_at_camera(f"cam{index}", size, focal_px, eye, center, UP))
     return cameras
-
-
-
-def _replace_rotation(camera: PinholeCamera, rotation: np.ndarray) -> PinholeCamera:
-    if not isinstance(camera, PinholeCamera):
-        raise InputError(
-            f"cameras: expected PinholeCamera (a calibration TOML holds no other kind), got {type(camera).__name__}"
-        )
-    return PinholeCamera(camera.name, camera.size, camera.intrinsics, camera.distortion, rotation, camera.translation)

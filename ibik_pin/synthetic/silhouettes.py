@@ -1,9 +1,13 @@
 """Silhouettes of a posed model rendered into calibrated cameras.
+
+The body is drawn as capsules along its segments (radii from the model) and a sphere for the
+head, by :func:`ibik_pin.vision.render.render_capsules`; the pixels that only a forearm or a shank
+covers are rendered apart, for the defect that loses a limb (:mod:`ibik_pin.synthetic.defects`).
 """
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import pinocchio as pin
@@ -12,20 +16,31 @@ from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.vision.render import render_capsules
 
+__all__ = ["MISSING_LIMB_SEGMENTS", "keypoint_positions", "render_limb_masks", "render_silhouettes"]
+
 #: Keypoints a forearm or shank capsule ends on: the limbs a segmentation may lose.
 MISSING_LIMB_SEGMENTS = (("LElbow", "LWrist"), ("RElbow", "RWrist"), ("LKnee", "LAnkle"), ("RKnee", "RAnkle"))
 
 
+def keypoint_positions(body: BodyModel, q: np.ndarray) -> dict[str, np.ndarray]:
+    """World position of every keypoint of the body at a configuration.
 
-def _keypoint_positions(body: BodyModel, q: np.ndarray) -> dict[str, np.ndarray]:
-    """World position [m] of every keypoint of the body at q."""
+    Args:
+        body: The model and its keypoints.
+        q: Configuration, shape (nq,).
+
+    Returns:
+        Keypoint name -> position, shape (3,) [m], in the body's order.
+
+    Raises:
+        InputError: ``q`` is not of shape (nq,).
+    """
     q = np.asarray(q, dtype=float)
     if q.shape != (body.model.nq,):
         raise InputError(f"q: expected shape ({body.model.nq},), got {q.shape}")
     data = body.model.createData()
     pin.framesForwardKinematics(body.model, data, q)
     return {name: data.oMf[body.frame_id(name)].translation.copy() for name in body.keypoints}
-
 
 
 def _head_sphere(points: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -36,7 +51,6 @@ def _head_sphere(points: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]
     neck_to_head = points["Head"] - points["Neck"]
     centre = points["Neck"] + 0.6 * neck_to_head
     return centre[np.newaxis], np.array([0.42 * np.linalg.norm(neck_to_head)])
-
 
 
 def render_silhouettes(body: BodyModel, q: np.ndarray, cameras: Sequence) -> list[np.ndarray]:
@@ -51,7 +65,7 @@ def render_silhouettes(body: BodyModel, q: np.ndarray, cameras: Sequence) -> lis
     Returns:
         One (H, W) bool mask per camera.
     """
-    points = _keypoint_positions(body, q)
+    points = keypoint_positions(body, q)
     starts = np.array([points[a] for a, _ in body.segments]).reshape(-1, 3)
     ends = np.array([points[b] for _, b in body.segments]).reshape(-1, 3)
     spheres, sphere_radii = _head_sphere(points)
@@ -59,7 +73,6 @@ def render_silhouettes(body: BodyModel, q: np.ndarray, cameras: Sequence) -> lis
         render_capsules(camera, starts, ends, body.segment_radii, spheres, sphere_radii)
         for camera in cameras
     ]
-
 
 
 def render_limb_masks(body: BodyModel, q: np.ndarray, camera) -> list[np.ndarray]:
@@ -71,7 +84,7 @@ def render_limb_masks(body: BodyModel, q: np.ndarray, camera) -> list[np.ndarray
     Returns:
         One (H, W) bool mask per limb segment the body has.
     """
-    points = _keypoint_positions(body, q)
+    points = keypoint_positions(body, q)
     spheres, sphere_radii = _head_sphere(points)
     masks = []
     for limb in MISSING_LIMB_SEGMENTS:
