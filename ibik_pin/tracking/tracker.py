@@ -88,6 +88,9 @@ class TrackingResult:
         keypoint_names: every keypoint of the body.
         keypoints: (F, K, 3) world positions of those keypoints [m].
         target_residuals: (F,) mean distance of the present targets to their keypoints [m].
+        target_names: the T target keypoints, in the order of the targets given to track().
+        target_distances: (F, T) distance of each target keypoint of the model to its target [m],
+            NaN where the target is absent that frame.
         overlap: (F, V) the criterion of each view at the solution (NaN where disabled).
         limit_hits: per frame, the joints at a limit.
         dropped_targets: per frame, the targets absent (NaN) in that frame.
@@ -104,6 +107,8 @@ class TrackingResult:
     dropped_targets: list[list[str]] = field(default_factory=list)
     disabled_views: list[list[str]] = field(default_factory=list)
     solve_seconds: float = 0.0
+    target_names: list[str] = field(default_factory=list)
+    target_distances: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
     @property
     def frames_per_second(self) -> float:
@@ -284,6 +289,8 @@ class Tracker:
             keypoint_names=keypoint_names,
             keypoints=np.zeros((frame_count, len(keypoint_names), 3)),
             target_residuals=np.zeros(frame_count),
+            target_names=list(names),
+            target_distances=np.full((frame_count, len(names)), np.nan),
             overlap=np.full((frame_count, len(self.cameras)), np.nan),
         )
         configuration = Configuration(self.body.model, initial_configuration(self.body, names, targets[0]))
@@ -314,9 +321,12 @@ class Tracker:
             result.solve_seconds += time.perf_counter() - started
             result.q[frame] = configuration.q
             result.keypoints[frame] = configuration.frame_positions(keypoint_ids)
-            errors = [np.linalg.norm(self._target_tasks[n].compute_error(configuration))
-                      for n, p in zip(names, present) if p]
-            result.target_residuals[frame] = np.mean(errors) if errors else np.nan
+            for k, name in enumerate(names):
+                if present[k]:
+                    result.target_distances[frame, k] = np.linalg.norm(
+                        self._target_tasks[name].compute_error(configuration))
+            errors = result.target_distances[frame, present]
+            result.target_residuals[frame] = np.mean(errors) if errors.size else np.nan
             if use_image:
                 result.overlap[frame] = self._overlap_per_view(configuration, disabled)
             result.limit_hits.append(self.limits.at_limit(configuration.q))
