@@ -7,31 +7,27 @@ One section per camera with the keys ``name``, ``size`` = [width, height], ``mat
 
 from __future__ import annotations
 
-import json
-import re
 import sys
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
+import tomli_w
 
+from ibik_pin.checks import as_finite_array, as_image_size
 from ibik_pin.exceptions import FileFormatError, InputError
 from ibik_pin.io.files import PathLike, write_text_atomically
-from ibik_pin.vision.camera import PinholeCamera, _as_array, _as_size
+from ibik_pin.vision.camera import PinholeCamera
 
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover - exercised on Python 3.10 only
     import tomli as tomllib
 
+__all__ = ["POSE2SIM_TRC_TO_WORLD", "read_calibration", "write_calibration"]
 
 # Pose2Sim sections that do not describe a camera.
 _NON_CAMERA_SECTIONS = frozenset({"metadata", "capture_volume", "charuco", "checkerboard"})
-
-
-
-_BARE_TOML_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
-
 
 
 def read_calibration(path: PathLike) -> list[PinholeCamera]:
@@ -83,7 +79,6 @@ def read_calibration(path: PathLike) -> list[PinholeCamera]:
     return cameras
 
 
-
 def _camera_from_section(path: Path, section: str, table: dict) -> PinholeCamera:
     where = f"calibration file '{path}', section [{section}]"
 
@@ -91,7 +86,7 @@ def _camera_from_section(path: Path, section: str, table: dict) -> PinholeCamera
         if key not in table:
             raise FileFormatError(f"{where}: missing key '{key}' ({description}); found keys {sorted(table)}")
         try:
-            return _as_array(table[key], shapes, key)
+            return as_finite_array(table[key], shapes, key)
         except InputError as error:
             raise FileFormatError(f"{where}, key '{key}' ({description}): {_detail(error)}") from None
 
@@ -114,7 +109,7 @@ def _camera_from_section(path: Path, section: str, table: dict) -> PinholeCamera
     rvec = value("rotation", (3,), "Rodrigues vector, world to camera")
     tvec = value("translation", (3,), "world to camera [m]")
     try:
-        size = _as_size(size.tolist())
+        size = as_image_size(size.tolist())
     except InputError as error:
         raise FileFormatError(f"{where}, key 'size': {_detail(error)}") from None
     try:
@@ -125,24 +120,10 @@ def _camera_from_section(path: Path, section: str, table: dict) -> PinholeCamera
         raise FileFormatError(f"{where}, key '{key}': {_detail(error)}") from None
 
 
-
 def _detail(error: InputError) -> str:
     """The message of an InputError without its leading 'parameter: '."""
     message = str(error)
     return message.split(": ", 1)[1] if ": " in message else message
-
-
-
-def _toml_key(name: str) -> str:
-    return name if _BARE_TOML_KEY.match(name) else json.dumps(name, ensure_ascii=False)
-
-
-
-def _toml_array(values: np.ndarray) -> str:
-    if values.ndim == 1:
-        return "[ " + ", ".join(repr(float(v)) for v in values) + "]"
-    return "[ " + ", ".join(_toml_array(row) for row in values) + "]"
-
 
 
 def write_calibration(path: PathLike, cameras: Sequence[PinholeCamera]) -> None:
@@ -160,36 +141,32 @@ def write_calibration(path: PathLike, cameras: Sequence[PinholeCamera]) -> None:
         OSError: the file cannot be written.
     """
     path = Path(path)
-    lines: list[str] = []
-    seen: set[str] = set()
+    document: dict[str, dict] = {}
     for index, camera in enumerate(cameras):
         if not isinstance(camera, PinholeCamera):
             raise InputError(
                 f"cameras[{index}]: expected a PinholeCamera (the TOML format has no other kind), "
                 f"found {type(camera).__name__}"
             )
-        if camera.name in seen or camera.name in _NON_CAMERA_SECTIONS:
+        if camera.name in document or camera.name in _NON_CAMERA_SECTIONS:
             raise InputError(
                 f"cameras[{index}].name: expected a unique name other than {sorted(_NON_CAMERA_SECTIONS)}, "
                 f"found {camera.name!r}"
             )
-        seen.add(camera.name)
-        lines += [
-            f"[{_toml_key(camera.name)}]",
-            f"name = {json.dumps(camera.name, ensure_ascii=False)}",
-            f"size = {_toml_array(np.asarray(camera.size, dtype=np.float64))}",
-            f"matrix = {_toml_array(camera.intrinsics)}",
-            f"distortions = {_toml_array(camera.distortion)}",
-            f"rotation = {_toml_array(camera.rvec)}",
-            f"translation = {_toml_array(camera.translation)}",
-            "fisheye = false",
-            "",
-        ]
-    if not seen:
+        # Python floats: tomli-w writes them with repr, the shortest string that reads back the same.
+        document[camera.name] = {
+            "name": camera.name,
+            "size": [float(length) for length in camera.size],  # Pose2Sim writes the size as floats
+            "matrix": camera.intrinsics.tolist(),
+            "distortions": camera.distortion.tolist(),
+            "rotation": camera.rvec.tolist(),
+            "translation": camera.translation.tolist(),
+            "fisheye": False,
+        }
+    if not document:
         raise InputError("cameras: expected at least one camera, found none")
-    lines += ["[metadata]", "adjusted = false", "error = 0.0", ""]
-    write_text_atomically(path, "\n".join(lines))
-
+    document["metadata"] = {"adjusted": False, "error": 0.0}
+    write_text_atomically(path, tomli_w.dumps(document))
 
 
 # Pose2Sim writes TRC files Y-up while its calibration's world is Z-up: a TRC point (x, y, z) is the

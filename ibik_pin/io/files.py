@@ -1,4 +1,10 @@
-"""Reading and writing files safely: text with clear errors, atomic writes."""
+"""Reading and writing files safely: text with clear errors, atomic writes.
+
+Every reader of :mod:`ibik_pin.io` reads through :func:`read_text` (any failure becomes a
+:class:`~ibik_pin.exceptions.FileFormatError` naming the file) and every writer writes through
+:func:`write_atomically` (a temporary file beside the target, renamed over it when complete), so a
+failure never leaves a half-written file.
+"""
 
 from __future__ import annotations
 
@@ -15,11 +21,19 @@ from ibik_pin.exceptions import (
     InputError,
 )
 
+__all__ = [
+    "PathLike",
+    "check_declared_count",
+    "is_number",
+    "read_text",
+    "write_atomically",
+    "write_text_atomically",
+]
+
+#: A path as the readers and writers accept it.
 PathLike = str | os.PathLike
 
-
 _Result = TypeVar("_Result")
-
 
 
 def read_text(path: str | os.PathLike[str], what: str) -> str:
@@ -41,7 +55,6 @@ def read_text(path: str | os.PathLike[str], what: str) -> str:
         raise FileFormatError(f"{path}: cannot read this {what} file: {error}") from error
 
 
-
 def is_number(text: str) -> bool:
     """Whether ``float(text)`` succeeds; finds the offending cell for an error message."""
     try:
@@ -49,7 +62,6 @@ def is_number(text: str) -> bool:
     except ValueError:
         return False
     return True
-
 
 
 def check_declared_count(path, key: str, declared: int, found: int, what: str) -> None:
@@ -61,7 +73,6 @@ def check_declared_count(path, key: str, declared: int, found: int, what: str) -
         raise FileFormatError(message)
     if found > declared:
         warnings.warn(f"{message}; all {what} are kept", IbikWarning, stacklevel=3)
-
 
 
 def write_atomically(path: str | os.PathLike[str], write: Callable[[Path], _Result]) -> _Result:
@@ -84,7 +95,6 @@ def write_atomically(path: str | os.PathLike[str], write: Callable[[Path], _Resu
             raise InputError(f"{path}: cannot write: {error}") from error
         raise
     return result
-
 
 
 def write_text_atomically(path: str | os.PathLike[str], text: str) -> None:

@@ -1,4 +1,8 @@
 """Silhouette masks on disk: one image per frame, non-zero = person.
+
+A camera's masks are the image files of one folder, in the natural order of their names
+(``frame2`` before ``frame10``); each is read as grey levels and thresholded, so 0/255 masks
+(also JPEG-compressed ones) and 0/1 label images both work.
 """
 
 from __future__ import annotations
@@ -12,8 +16,10 @@ import numpy as np
 from ibik_pin.exceptions import FileFormatError, InputError
 from ibik_pin.io.files import PathLike
 
-IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"})
+__all__ = ["IMAGE_SUFFIXES", "list_mask_files", "read_mask"]
 
+#: The file suffixes read as images (any case).
+IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"})
 
 
 def read_mask(path: PathLike, expected_size: tuple[int, int] | None = None) -> np.ndarray:
@@ -47,10 +53,8 @@ def read_mask(path: PathLike, expected_size: tuple[int, int] | None = None) -> n
     return image > threshold
 
 
-
 def _natural_key(path: Path) -> list:
     return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", path.name)]
-
 
 
 def list_mask_files(folder: PathLike) -> list[Path]:

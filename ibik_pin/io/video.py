@@ -1,4 +1,5 @@
-"""Video files, read frame by frame with OpenCV.
+"""Video files, read frame by frame with OpenCV: a reader that reports the size and frame rate,
+and a generator of frames for a single pass.
 """
 
 from __future__ import annotations
@@ -11,6 +12,8 @@ import numpy as np
 
 from ibik_pin.exceptions import FileFormatError, InputError
 from ibik_pin.io.files import PathLike
+
+__all__ = ["VideoReader", "read_frames"]
 
 
 class VideoReader:
@@ -78,8 +81,19 @@ class VideoReader:
         self.close()
 
 
+def read_frames(path: PathLike, max_frames: int | None = None) -> Iterator[np.ndarray]:
+    """The frames of a video, one at a time, the file closed when the iteration ends.
 
-def _frames(path: Path, max_frames: int | None) -> Iterator[np.ndarray]:
+    Args:
+        path: The video file.
+        max_frames: Stop after this many frames; None for all.
+
+    Yields:
+        Frames (H, W, 3) BGR uint8.
+
+    Raises:
+        FileFormatError: The file cannot be opened as a video.
+    """
     with VideoReader(path) as reader:
         for index, frame in enumerate(reader):
             if max_frames is not None and index >= max_frames:

@@ -14,7 +14,6 @@ Two camera kinds share the same interface (``project``, ``project_with_jacobian`
 from __future__ import annotations
 
 import dataclasses
-import math
 import sys
 from dataclasses import dataclass
 from typing import NamedTuple, Sequence
@@ -22,6 +21,7 @@ from typing import NamedTuple, Sequence
 import cv2
 import numpy as np
 
+from ibik_pin.checks import as_finite_array, as_image_size, as_radii
 from ibik_pin.exceptions import InputError, UnknownNameError
 
 if sys.version_info >= (3, 11):
@@ -57,22 +57,6 @@ def _read_only(array: np.ndarray) -> np.ndarray:
 
 
 
-def _as_array(value, shape: tuple[int, ...] | Sequence[tuple[int, ...]], name: str) -> np.ndarray:
-    """A finite float64 array of one of the given shapes, else InputError naming ``name``."""
-    shapes = [shape] if len(shape) == 0 or isinstance(shape[0], int) else list(shape)
-    try:
-        array = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as error:
-        raise InputError(f"{name}: expected a numeric array, found {value!r} ({error})") from None
-    if array.shape not in [tuple(s) for s in shapes]:
-        expected = " or ".join(str(tuple(s)) for s in shapes)
-        raise InputError(f"{name}: expected shape {expected}, found shape {array.shape}")
-    if not np.all(np.isfinite(array)):
-        raise InputError(f"{name}: expected finite values, found {array.tolist()}")
-    return array
-
-
-
 def _as_points(points_world, name: str = "points_world") -> np.ndarray:
     """(N, 3) float64 view of the points; non-finite values propagate to the result."""
     points = np.asarray(points_world, dtype=np.float64)
@@ -82,19 +66,8 @@ def _as_points(points_world, name: str = "points_world") -> np.ndarray:
 
 
 
-def _as_size(size, name: str = "size") -> tuple[int, int]:
-    try:
-        values = [float(s) for s in size]
-    except (TypeError, ValueError):
-        raise InputError(f"{name}: expected (width, height) in pixels, found {size!r}") from None
-    if len(values) != 2 or not all(math.isfinite(s) and s >= 1 and s == int(s) for s in values):
-        raise InputError(f"{name}: expected (width, height), two positive integers [px], found {size!r}")
-    return int(values[0]), int(values[1])
-
-
-
 def _as_rotation(rotation, name: str = "rotation") -> np.ndarray:
-    R = _as_array(rotation, (3, 3), name)
+    R = as_finite_array(rotation, (3, 3), name)
     orthonormality_error = np.abs(R @ R.T - np.eye(3)).max()
     if orthonormality_error > _ROTATION_TOLERANCE or np.linalg.det(R) < 0.0:
         raise InputError(
@@ -106,7 +79,7 @@ def _as_rotation(rotation, name: str = "rotation") -> np.ndarray:
 
 
 def _rotation_from_rodrigues(rvec, name: str = "rvec") -> np.ndarray:
-    vector = _as_array(rvec, [(3,), (3, 1), (1, 3)], name).reshape(3, 1)
+    vector = as_finite_array(rvec, [(3,), (3, 1), (1, 3)], name).reshape(3, 1)
     R, _ = cv2.Rodrigues(vector)
     return R
 
@@ -127,9 +100,9 @@ class Camera:
     def _validate_placement(self) -> None:
         if not isinstance(self.name, str) or not self.name:
             raise InputError(f"name: expected a non-empty string, found {self.name!r}")
-        object.__setattr__(self, "size", _as_size(self.size))
+        object.__setattr__(self, "size", as_image_size(self.size))
         object.__setattr__(self, "rotation", _read_only(_as_rotation(self.rotation)))
-        object.__setattr__(self, "translation", _read_only(_as_array(self.translation, (3,), "translation")))
+        object.__setattr__(self, "translation", _read_only(as_finite_array(self.translation, (3,), "translation")))
 
     @property
     def width(self) -> int:
@@ -201,16 +174,6 @@ class Camera:
             & (pixels[:, 1] <= self.height - 1)
         )
 
-    def _radii(self, radii, count: int) -> np.ndarray:
-        radii = np.asarray(radii, dtype=np.float64)
-        if radii.ndim == 0:
-            radii = np.full(count, float(radii))
-        if radii.shape != (count,):
-            raise InputError(f"radii: expected shape ({count},) [m] or a scalar, found shape {radii.shape}")
-        return radii
-
-
-
 @dataclass(frozen=True, eq=False)
 class PinholeCamera(Camera):
     """A calibrated pinhole camera with OpenCV's distortion model (k1, k2, p1, p2[, k3]).
@@ -239,7 +202,7 @@ class PinholeCamera(Camera):
 
     def __post_init__(self) -> None:
         self._validate_placement()
-        K = _as_array(self.intrinsics, (3, 3), "intrinsics")
+        K = as_finite_array(self.intrinsics, (3, 3), "intrinsics")
         if not np.array_equal(K[2], [0.0, 0.0, 1.0]) or K[1, 0] != 0.0 or K[0, 0] <= 0.0 or K[1, 1] <= 0.0:
             raise InputError(
                 "intrinsics: expected [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, "
@@ -248,7 +211,7 @@ class PinholeCamera(Camera):
         if K[0, 1] != 0.0:
             raise InputError(f"intrinsics: expected zero skew K[0, 1] (OpenCV's model), found {K[0, 1]}")
         object.__setattr__(self, "intrinsics", _read_only(K))
-        object.__setattr__(self, "distortion", _read_only(_as_array(self.distortion, [(4,), (5,)], "distortion")))
+        object.__setattr__(self, "distortion", _read_only(as_finite_array(self.distortion, [(4,), (5,)], "distortion")))
 
     @classmethod
     def from_rodrigues(
@@ -339,7 +302,7 @@ class PinholeCamera(Camera):
         Distortion is ignored (a local scale); NaN where the depth is not positive.
         """
         depth = self.points_camera(points_world)[:, 2]
-        radii = self._radii(radii, depth.shape[0])
+        radii = as_radii(radii, depth.shape[0])
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(depth > 0.0, self.focal_px * radii / depth, np.nan)
 
@@ -370,12 +333,12 @@ class OrthographicCamera(Camera):
 
     def __post_init__(self) -> None:
         self._validate_placement()
-        scale = float(_as_array(self.scale, (), "scale"))
+        scale = float(as_finite_array(self.scale, (), "scale"))
         if scale <= 0.0:
             raise InputError(f"scale: expected a positive number of pixels per metre, found {scale}")
         object.__setattr__(self, "scale", scale)
         object.__setattr__(
-            self, "principal_point", _read_only(_as_array(self.principal_point, (2,), "principal_point"))
+            self, "principal_point", _read_only(as_finite_array(self.principal_point, (2,), "principal_point"))
         )
 
     def project(self, points_world: np.ndarray) -> np.ndarray:
@@ -393,7 +356,7 @@ class OrthographicCamera(Camera):
     def pixel_radius(self, points_world: np.ndarray, radii: np.ndarray) -> np.ndarray:
         """Image radius ``scale * r`` [px] of spheres (N, 3) [m] of radii (N,) [m]."""
         count = _as_points(points_world).shape[0]
-        return self.scale * self._radii(radii, count)
+        return self.scale * as_radii(radii, count)
 
 
 
@@ -421,16 +384,16 @@ def look_at_camera(
     Returns:
         The camera.
     """
-    width, height = _as_size(size)
-    focal = float(_as_array(focal_px, (), "focal_px"))
+    width, height = as_image_size(size)
+    focal = float(as_finite_array(focal_px, (), "focal_px"))
     if focal <= 0.0:
         raise InputError(f"focal_px: expected a positive focal length [px], found {focal}")
-    eye = _as_array(eye, (3,), "eye")
-    forward = _as_array(target, (3,), "target") - eye
+    eye = as_finite_array(eye, (3,), "eye")
+    forward = as_finite_array(target, (3,), "target") - eye
     if np.linalg.norm(forward) == 0.0:
         raise InputError(f"target: expected a point different from eye, found {forward + eye} for both")
     forward /= np.linalg.norm(forward)
-    right = np.cross(forward, _as_array(up, (3,), "up"))
+    right = np.cross(forward, as_finite_array(up, (3,), "up"))
     if np.linalg.norm(right) < 1e-9:
         raise InputError(f"up: expected a direction not parallel to the viewing direction {forward}, found {up}")
     right /= np.linalg.norm(right)

@@ -1,4 +1,8 @@
 """Silhouettes rendered from capsules (segments with a radius at each end) seen by a camera.
+
+Shapes are filled by OpenCV with sub-pixel vertices: OpenCV's drawing functions take integer
+coordinates with :data:`FIXED_POINT_SHIFT` fractional bits, which :func:`to_fixed_point` makes
+(the overlays of :mod:`ibik_pin.viz.drawing` draw with them too).
 """
 
 from __future__ import annotations
@@ -6,29 +10,25 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from ibik_pin.checks import as_radii
 from ibik_pin.exceptions import InputError
 from ibik_pin.vision.camera import Camera
+
+__all__ = ["FIXED_POINT_SHIFT", "render_capsules", "to_fixed_point"]
+
+#: Fractional bits of the pixel coordinates given to OpenCV's drawing functions (``shift``).
+FIXED_POINT_SHIFT = 4
 
 # Polygon vertices per projected disc: the inscribed polygon loses r (1 - cos(pi/n)),
 # 0.5 % of the radius.
 _DISC_VERTICES = 32
 
-
-
-# OpenCV's fixed-point drawing: coordinates carry _SHIFT fractional bits.
-_SHIFT = 4
-
-
-
 # OpenCV fills the pixels its outline touches, about half a pixel beyond the exact boundary:
 # the discs are shrunk by as much, so that rendered widths and areas are unbiased.
 _OUTLINE_BIAS_PX = 0.5
 
-
-
 # Vertices far outside the image are clamped to keep the fixed-point coordinates in int32.
 _MAX_COORDINATE_PX = 1e6
-
 
 
 def _as_points(points, name: str, count: int | None = None) -> np.ndarray:
@@ -39,23 +39,18 @@ def _as_points(points, name: str, count: int | None = None) -> np.ndarray:
     return points
 
 
+def to_fixed_point(pixels: np.ndarray) -> np.ndarray:
+    """Pixel coordinates as OpenCV's drawing functions take them with ``shift=FIXED_POINT_SHIFT``.
 
-def _as_radii(radii, name: str, count: int) -> np.ndarray:
-    radii = np.asarray(radii, dtype=np.float64)
-    if radii.ndim == 0:
-        radii = np.full(count, float(radii))
-    if radii.shape != (count,):
-        raise InputError(f"{name}: expected shape ({count},) [m] or a scalar, found shape {radii.shape}")
-    if not np.all(np.isfinite(radii)) or np.any(radii < 0.0):
-        raise InputError(f"{name}: expected finite non-negative radii [m], found {radii.tolist()}")
-    return radii
+    Args:
+        pixels: Coordinates, any shape [px]; finite.
 
-
-
-def _fixed_point(pixels: np.ndarray) -> np.ndarray:
+    Returns:
+        The coordinates times 2**FIXED_POINT_SHIFT, rounded, int32, same shape; coordinates beyond
+        1e6 px are clamped there first, to stay within int32.
+    """
     clamped = np.clip(pixels, -_MAX_COORDINATE_PX, _MAX_COORDINATE_PX)
-    return np.rint(clamped * (1 << _SHIFT)).astype(np.int32)
-
+    return np.rint(clamped * (1 << FIXED_POINT_SHIFT)).astype(np.int32)
 
 
 def render_capsules(
@@ -74,8 +69,8 @@ def render_capsules(
     the camera cannot see (behind a pinhole camera) are skipped, not clipped.
 
     Args:
-        camera: a :class:`~ibik_pin.cameras.PinholeCamera` or
-            :class:`~ibik_pin.cameras.OrthographicCamera`.
+        camera: a :class:`~ibik_pin.vision.camera.PinholeCamera` or
+            :class:`~ibik_pin.vision.camera.OrthographicCamera`.
         starts_world: (S, 3) first end of each capsule's axis [m].
         ends_world: (S, 3) second end [m].
         radii: (S,) capsule radii [m], or a scalar.
@@ -87,14 +82,14 @@ def render_capsules(
     """
     starts = _as_points(starts_world, "starts_world")
     ends = _as_points(ends_world, "ends_world", starts.shape[0])
-    radii = _as_radii(radii, "radii", starts.shape[0])
+    radii = as_radii(radii, starts.shape[0], "radii")
     if spheres_world is not None:
         if sphere_radii is None:
             raise InputError("sphere_radii: expected radii [m] for spheres_world, found None")
         spheres = _as_points(spheres_world, "spheres_world")
         starts = np.concatenate((starts, spheres))
         ends = np.concatenate((ends, spheres))
-        radii = np.concatenate((radii, _as_radii(sphere_radii, "sphere_radii", spheres.shape[0])))
+        radii = np.concatenate((radii, as_radii(sphere_radii, spheres.shape[0], "sphere_radii")))
     width, height = camera.size
     image = np.zeros((height, width), np.uint8)
     if starts.shape[0] == 0:
@@ -113,8 +108,8 @@ def render_capsules(
     outline_radii = np.maximum(pixel_radii - _OUTLINE_BIAS_PX, 0.0)
     outlines = pixels[:, np.newaxis, :] + outline_radii[:, np.newaxis, np.newaxis] * circle
     outlines = np.concatenate((outlines[:count], outlines[count:]), axis=1)
-    vertices = _fixed_point(np.where(visible[:, np.newaxis, np.newaxis], outlines, 0.0))
+    vertices = to_fixed_point(np.where(visible[:, np.newaxis, np.newaxis], outlines, 0.0))
     for index in np.flatnonzero(visible):
         hull = cv2.convexHull(vertices[index])
-        cv2.fillConvexPoly(image, hull, 1, lineType=cv2.LINE_8, shift=_SHIFT)
+        cv2.fillConvexPoly(image, hull, 1, lineType=cv2.LINE_8, shift=FIXED_POINT_SHIFT)
     return image.astype(bool)

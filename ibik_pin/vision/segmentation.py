@@ -1,19 +1,26 @@
 """Silhouettes from images: background subtraction of videos, and temporal voting of masks.
+
+:func:`silhouettes_from_video` segments the moving person of a still camera's video with OpenCV's
+MOG2 background model, learnt on frames of the empty scene or, without them, on the video's own
+median plate; :class:`TemporalMajority` votes each pixel of a mask sequence over neighbouring
+frames to remove segmentation flicker.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import Callable, Iterator, Sequence
 
 import cv2
 import numpy as np
 
+from ibik_pin.checks import as_mask
 from ibik_pin.exceptions import FileFormatError, InputError
 from ibik_pin.io.files import PathLike
 from ibik_pin.io.masks import IMAGE_SUFFIXES
-from ibik_pin.io.video import VideoReader, _frames
-from ibik_pin.vision.support import _as_mask
+from ibik_pin.io.video import VideoReader, read_frames
+
+__all__ = ["TemporalMajority", "silhouettes_from_video"]
 
 
 class TemporalMajority:
@@ -50,11 +57,10 @@ class TemporalMajority:
             del self._window[old]
         for index in indices:
             if index not in self._window:
-                self._window[index] = [_as_mask(mask) for mask in self.source(index)]
+                self._window[index] = [as_mask(mask) for mask in self.source(index)]
         window = [self._window[index] for index in indices]
         return [2 * np.sum([masks[camera] for masks in window], axis=0, dtype=np.int32) > len(window)
                 for camera in range(len(window[0]))]
-
 
 
 def _background_frames(paths: Sequence[PathLike], size: tuple[int, int]) -> Iterator[np.ndarray]:
@@ -66,7 +72,7 @@ def _background_frames(paths: Sequence[PathLike], size: tuple[int, int]) -> Iter
                 raise FileFormatError(f"background file '{path}': expected a readable image, found none")
             frames: Iterator[np.ndarray] = iter([image])
         else:
-            frames = _frames(path, None)
+            frames = read_frames(path, None)
         for frame in frames:
             found = (frame.shape[1], frame.shape[0])
             if found != size:
@@ -74,7 +80,6 @@ def _background_frames(paths: Sequence[PathLike], size: tuple[int, int]) -> Iter
                     f"background file '{path}': expected the video's size (w, h) = {size}, found (w, h) = {found}"
                 )
             yield frame
-
 
 
 def _keep_largest_components(mask: np.ndarray, max_components: int, min_component_fraction: float) -> np.ndarray:
@@ -87,7 +92,6 @@ def _keep_largest_components(mask: np.ndarray, max_components: int, min_componen
     keep = np.zeros(count, bool)
     keep[order + 1] = True
     return keep[labels]
-
 
 
 def silhouettes_from_video(
@@ -172,7 +176,7 @@ def silhouettes_from_video(
         # Without an announced frame count, the plate is the median of the first frames.
         stride = max(1, -(-frame_total // median_frames)) if frame_total > 0 else 1
         sample = []
-        for index, frame in enumerate(_frames(video_path, max_frames)):
+        for index, frame in enumerate(read_frames(video_path, max_frames)):
             if index % stride == 0:
                 sample.append(frame)
                 if len(sample) == median_frames:
@@ -189,7 +193,7 @@ def silhouettes_from_video(
     open_kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (open_px, open_px)) if open_px > 0 else None
     close_kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (close_px, close_px)) if close_px > 0 else None
     masks = []
-    for frame in _frames(video_path, max_frames):
+    for frame in read_frames(video_path, max_frames):
         mask = (subtractor.apply(frame, learningRate=0.0) == 255).astype(np.uint8)  # 127 = shadow
         if open_kernel is not None:
             mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, open_kernel)

@@ -17,6 +17,7 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
+from ibik_pin.checks import as_mask
 from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
 
 
@@ -139,18 +140,6 @@ class SupportImage:
 
 
 
-def _as_mask(mask, name: str = "mask") -> np.ndarray:
-    """A (H, W) bool array from a bool or uint8 mask (non-zero = set), else InputError."""
-    if not isinstance(mask, np.ndarray):
-        raise InputError(f"{name}: expected a numpy array of dtype bool or uint8, found {type(mask).__name__}")
-    if mask.dtype not in (np.bool_, np.uint8):
-        raise InputError(f"{name}: expected dtype bool or uint8 (non-zero = set), found dtype {mask.dtype}")
-    if mask.ndim != 2 or mask.shape[0] < 1 or mask.shape[1] < 1:
-        raise InputError(f"{name}: expected a 2D (H, W) array, found shape {mask.shape}")
-    return mask != 0
-
-
-
 def _positive_or_none(value, name: str) -> float | None:
     if value is None:
         return None
@@ -211,7 +200,7 @@ def support_from_mask(
     Raises:
         InputError: the mask is not a 2D bool/uint8 array, or a parameter is out of range.
     """
-    mask = _as_mask(mask)
+    mask = as_mask(mask)
     inside_cap_px = _positive_or_none(inside_cap_px, "inside_cap_px")
     outside_cap_px = _positive_or_none(outside_cap_px, "outside_cap_px")
     smooth_sigma_px = float(smooth_sigma_px)
@@ -257,7 +246,7 @@ def obstacle_support(object_mask: np.ndarray, influence_px: float) -> SupportIma
     Raises:
         InputError: the mask is not a 2D bool/uint8 array, or ``influence_px`` is not positive.
     """
-    mask = _as_mask(object_mask, "object_mask")
+    mask = as_mask(object_mask, "object_mask")
     influence = _positive_or_none(influence_px, "influence_px")
     if influence is None:
         raise InputError("influence_px: expected a positive number of pixels, found None")

@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 
 from ibik_pin.exceptions import InputError
-from ibik_pin.vision.render import _SHIFT, _fixed_point
+from ibik_pin.vision.render import FIXED_POINT_SHIFT, to_fixed_point
 
 
 def _as_bgr(image_bgr) -> np.ndarray:
@@ -17,7 +17,6 @@ def _as_bgr(image_bgr) -> np.ndarray:
             f"image_bgr: expected a (H, W, 3) uint8 BGR image, found shape {image.shape} and dtype {image.dtype}"
         )
     return image
-
 
 
 def draw_skeleton(
@@ -50,12 +49,11 @@ def draw_skeleton(
     if int(thickness) != thickness or thickness < 1:
         raise InputError(f"thickness: expected a positive integer [px], found {thickness!r}")
     finite = np.isfinite(starts).all(axis=1) & np.isfinite(ends).all(axis=1)
-    fixed_starts, fixed_ends = _fixed_point(starts[finite]), _fixed_point(ends[finite])
+    fixed_starts, fixed_ends = to_fixed_point(starts[finite]), to_fixed_point(ends[finite])
     color = tuple(int(c) for c in color)
-    for start, end in zip(fixed_starts, fixed_ends):
-        cv2.line(image, tuple(start.tolist()), tuple(end.tolist()), color, int(thickness), cv2.LINE_AA, _SHIFT)
+    for start, end in zip(fixed_starts.tolist(), fixed_ends.tolist(), strict=True):
+        cv2.line(image, tuple(start), tuple(end), color, int(thickness), cv2.LINE_AA, FIXED_POINT_SHIFT)
     return image
-
 
 
 def overlay_mask(
