@@ -1,4 +1,7 @@
 """Drawing on images: a projected skeleton, a silhouette mask.
+
+Both return a drawn copy and leave the image alone. Segments are drawn anti-aliased at sub-pixel
+positions (OpenCV's fixed-point coordinates, :func:`ibik_pin.vision.render.to_fixed_point`).
 """
 
 from __future__ import annotations
@@ -8,6 +11,8 @@ import numpy as np
 
 from ibik_pin.exceptions import InputError
 from ibik_pin.vision.render import FIXED_POINT_SHIFT, to_fixed_point
+
+__all__ = ["draw_skeleton", "overlay_mask"]
 
 
 def _as_bgr(image_bgr) -> np.ndarray:

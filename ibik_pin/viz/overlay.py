@@ -1,4 +1,8 @@
 """Overlay videos: the estimated skeleton drawn over each camera's silhouettes (MP4).
+
+One video per camera, written frame by frame (a long sequence is never held in memory) with
+OpenCV's ``mp4v`` codec, atomically: the image or the silhouette as background, the silhouette
+blended in colour, the projected skeleton on top.
 """
 
 from __future__ import annotations
@@ -15,13 +19,14 @@ from ibik_pin.exceptions import FileFormatError, InputError
 from ibik_pin.io.files import write_atomically
 from ibik_pin.viz.drawing import draw_skeleton, overlay_mask
 
+__all__ = ["write_overlay_video"]
+
 # Mask pixels drawn as the background when there is no image: grey level (0-255).
 _MASK_GREY = 150
 
 
-
+# Stands for the item of an input that ended before the others.
 _MISSING = object()
-
 
 
 def write_overlay_video(
@@ -36,7 +41,7 @@ def write_overlay_video(
     """An MP4 video (``mp4v``) of the projected skeleton over the images and silhouettes.
 
     Each video frame is the image, with the silhouette mask blended over it in ``mask_color``
-    if masks are given, and the skeleton drawn with :func:`~ibik_pin.render.draw_skeleton`.
+    if masks are given, and the skeleton drawn with :func:`~ibik_pin.viz.drawing.draw_skeleton`.
     Without images (``frames_bgr=None``) the mask itself is the background, drawn grey on black.
     The inputs are consumed one frame at a time (generators are fine: a long video is never
     held in memory) and must yield as many items each.
@@ -71,7 +76,7 @@ def write_overlay_video(
         try:
             items_per_frame = itertools.zip_longest(*sources.values(), fillvalue=_MISSING)
             for index, items in enumerate(items_per_frame):
-                item = dict(zip(sources, items))
+                item = dict(zip(sources, items, strict=True))
                 ended = [name for name, value in item.items() if value is _MISSING]
                 if ended:
                     longer = [name for name in item if name not in ended]
@@ -99,7 +104,6 @@ def write_overlay_video(
                 writer.release()
 
     return write_atomically(path, write)
-
 
 
 def _overlay_frame(
@@ -143,7 +147,6 @@ def _overlay_frame(
             f"got {type(skeleton).__name__}"
         )
     return draw_skeleton(image, skeleton[0], skeleton[1], color=skeleton_color)
-
 
 
 def _open_video_writer(
