@@ -1,9 +1,10 @@
-"""Per-step cost of the solvers on the whole-body human, against Pink (DESIGN.md's anchors).
+"""Per-step cost of the solvers on the whole-body human, against Pink (docs/method.md, "Speed anchors").
 
-The problem of DESIGN.md: example-robot-data's human (36 DOF + free flyer), 6 position targets
-(pelvis, ankles, wrists, head) from a random reachable pose, a posture task, joint limits; steps
-from the neutral pose. Each scheme runs the same steps; the figures are per-step wall times
-(median over steps, after a warm-up), the final target error, and the steps whose QP failed.
+The problem on which Pink was first timed for this project: example-robot-data's human (36 DOF +
+free flyer), 6 position targets (pelvis, ankles, wrists, head) from a random reachable pose, a
+posture task, joint limits; steps from the neutral pose. Each scheme runs the same steps; the
+figures are per-step wall times (median over steps, after a warm-up), the final target error, and
+the steps whose QP failed.
 Also timed: one evaluation of the image criterion and its gradient with 1, 2 and 4 views.
 
 Pink (pip install '.[bench]') is optional: without it only ibik_pin's schemes run.

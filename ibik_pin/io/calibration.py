@@ -170,5 +170,5 @@ def write_calibration(path: PathLike, cameras: Sequence[PinholeCamera]) -> None:
 
 
 # Pose2Sim writes TRC files Y-up while its calibration's world is Z-up: a TRC point (x, y, z) is the
-# calibration-world point (z, x, y) (see ../shared/data/README.md, pose2sim_demo).
+# calibration-world point (z, x, y), as in Pose2Sim's demo data (docs/method.md, "Axes").
 POSE2SIM_TRC_TO_WORLD = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])

@@ -1,7 +1,7 @@
 """Scale the human model to a subject: segment lengths measured on keypoints, set on the model.
 
-DESIGN.md ("Segment lengths matter"): lengths 1-2 cm off double the elbow error of the image
-criterion, so the model is scaled to the subject before tracking. The lengths are distances between
+Lengths 1-2 cm off doubled the elbow error of the image criterion (docs/method.md, "Scaling the
+model to the subject"), so the model is scaled to the subject before tracking. The lengths are distances between
 Pose2Sim keypoints (median over the frames of a static or moving trial), and `scale_human` edits the
 joint placements (and keypoint frame placements) of a copy of the model until the same keypoint
 distances, measured on the model at its neutral pose, equal them.

@@ -3,10 +3,11 @@
 - `Task`: a least-squares task with an error e(q) and its Jacobian J(q). A step asks for
   J dq = -gain * e (first-order convergence of e to zero), weighted by `weight` within its level.
 - `GradientTask`: a scalar criterion h(q) to maximise (the image overlap of eq. 5-6). A step moves
-  along its unit gradient with a norm of at most `step_size` (DESIGN.md: a normalised secondary
-  step converges where the raw gradient, in pixels per radian, does not). The step size adapts
-  like Rprop on the direction the solver actually takes (the gradient projected into what the
-  higher levels leave free): halved when that direction reverses, grown back while it holds.
+  along its unit gradient with a norm of at most `step_size`: a normalised secondary step converges
+  where the raw gradient, in pixels per radian, does not. The step size adapts like Rprop on the
+  direction the solver actually takes (the gradient projected into what the higher levels leave
+  free): halved when that direction reverses, grown back while it holds. Why both: docs/method.md,
+  "The image step".
 """
 
 from __future__ import annotations

@@ -32,7 +32,7 @@ from ibik_pin.vision.support import support_from_mask
 LOWER_BODY = {"Hip", "LHip", "RHip", "LKnee", "RKnee", "LAnkle", "RAnkle", "LBigToe", "LSmallToe",
               "LHeel", "RBigToe", "RSmallToe", "RHeel"}
 CRITERIA = ("paper", "two-way")
-LIMB_HALF_WIDTH = 0.04  # [m] the support's inside cap, in pixels at the subject's distance (DESIGN.md)
+LIMB_HALF_WIDTH = 0.04  # [m] the support's inside cap, in pixels at the subject's distance (docs/method.md)
 
 # A frame's silhouettes: one (H, W) bool mask per camera, in the cameras' order.
 SilhouetteSource = Callable[[int], Sequence[np.ndarray]]
