@@ -109,3 +109,19 @@ def test_the_weighted_sum_adds_values_and_gradients(human, rng):
         WeightedSum([image, axis], [1.0])
     with pytest.raises(InputError, match="non-negative"):
         WeightedSum([image], [-1.0])
+
+
+def test_values_at_candidates_equal_the_criteria_at_the_configurations(human, rng):
+    silhouette_q = random_human_configuration(human, rng, spread=0.3)
+    views = _axis_views(human, silhouette_q)
+    image = ImageTask(human, [View(camera, support_from_mask(mask, inside_cap_px=4.0)) for camera, mask, _ in views])
+    axis = SilhouetteAxisTask(human, [view for _, _, view in views])
+    configurations = []
+    for _ in range(3):
+        q = random_human_configuration(human, rng, spread=0.3)
+        q[:7] = silhouette_q[:7]
+        configurations.append(Configuration(human.model, q))
+    for task in (image, axis):
+        batch = np.stack([c.frame_positions(task.frame_ids) for c in configurations])
+        np.testing.assert_allclose(task.values_at(batch), [task.compute_value(c) for c in configurations],
+                                   rtol=1e-10, atol=1e-12)

@@ -140,6 +140,29 @@ class ImageTask(GradientTask):
         self._cache_version = configuration.version
         return self._cache
 
+    @property
+    def frame_ids(self) -> np.ndarray:
+        """The model frames of the segment ends, in the order `values_at` takes them, shape (K,)."""
+        return self._frame_ids
+
+    def values_at(self, frame_positions: np.ndarray) -> np.ndarray:
+        """h for several placements of the segment ends at once (no configuration needed).
+
+        Args:
+            frame_positions: (C, K, 3) world positions [m] of the frames `frame_ids`, per candidate.
+
+        Returns:
+            (C,) the criterion of each candidate.
+        """
+        points = np.einsum("mk,ckd->cmd", self._interpolation, frame_positions)
+        candidates, samples = points.shape[:2]
+        values = np.zeros(candidates)
+        for view in self._active_views:
+            pixels, _, depth = view.camera.project_with_jacobian(points.reshape(-1, 3))
+            support = view.support.sample(pixels).values
+            values += np.where(depth > 1e-6, support, 0.0).reshape(candidates, samples).mean(axis=1)
+        return values / max(len(self._active_views), 1)
+
     def compute_value(self, configuration: Configuration) -> float:
         return self._evaluate(configuration)[0]
 

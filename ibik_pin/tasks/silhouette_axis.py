@@ -125,6 +125,40 @@ class SilhouetteAxisTask(GradientTask):
         self._cache_version = configuration.version
         return self._cache
 
+    @property
+    def frame_ids(self) -> np.ndarray:
+        """The model frames of the segment ends, in the order `values_at` takes them, shape (K,)."""
+        return self._frame_ids
+
+    def values_at(self, frame_positions: np.ndarray) -> np.ndarray:
+        """h_axis for several placements of the segment ends at once (no configuration needed).
+
+        Args:
+            frame_positions: (C, K, 3) world positions [m] of the frames `frame_ids`, per candidate.
+
+        Returns:
+            (C,) the criterion of each candidate (views with an end behind the camera skipped).
+        """
+        candidates, frames = frame_positions.shape[:2]
+        values = np.zeros(candidates)
+        counts = np.zeros(candidates)
+        for view in self._active_views:
+            pixels, _, depth = view.camera.project_with_jacobian(frame_positions.reshape(-1, 3))
+            pixels = pixels.reshape(candidates, frames, 2)
+            visible = (depth.reshape(candidates, frames) > 1e-6).all(axis=1)
+            starts, ends = pixels[:, self._start_index], pixels[:, self._end_index]  # (C, S, 2)
+            along = ends - starts
+            length_squared = np.maximum(np.einsum("csi,csi->cs", along, along), 1e-12)
+            offsets = view.pixels[None, :, None, :] - starts[:, None, :, :]  # (C, N, S, 2)
+            s = np.clip(np.einsum("cnsi,csi->cns", offsets, along) / length_squared[:, None, :], 0.0, 1.0)
+            residuals = offsets - s[..., None] * along[:, None, :, :]
+            nearest = np.einsum("cnsi,cnsi->cns", residuals, residuals).min(axis=2)  # (C, N)
+            scale = view.robust_scale_px
+            view_values = -0.5 * scale * np.mean(1.0 - np.exp(-nearest / scale**2), axis=1)
+            values += np.where(visible, view_values, 0.0)
+            counts += visible
+        return values / np.maximum(counts, 1)
+
     def compute_value(self, configuration: Configuration) -> float:
         return self._evaluate(configuration)[0]
 

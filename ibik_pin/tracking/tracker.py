@@ -25,6 +25,7 @@ from ibik_pin.tasks import FramePositionTask, ImageTask, PostureTask, View
 from ibik_pin.tasks.base import GradientTask
 from ibik_pin.tasks.silhouette_axis import AxisView, SilhouetteAxisTask
 from ibik_pin.tasks.weighted_sum import WeightedSum
+from ibik_pin.tracking.swivel import LIMB_ENDS, SwivelSearch
 from ibik_pin.vision.medial_axis import medial_axis_pixels
 from ibik_pin.vision.segmentation import TemporalMajority
 from ibik_pin.vision.support import support_from_mask
@@ -63,6 +64,10 @@ class TrackingSettings:
         axis_weight: weight of the silhouette-axis term in the two-way criterion.
         axis_scale: the axis term's robust scale [m] at the subject's distance: an axis sample
             farther than about this from every projected segment stops pulling.
+        swivel_search: after each frame's solve, sample the swivel circle of every elbow and knee
+            that is not a target on the image criterion, pull each toward a clearly better sample
+            and solve again (tracking.swivel): recovers limbs that fast motion threw into another
+            basin of the criterion.
     """
 
     method: str = "qp"
@@ -77,6 +82,7 @@ class TrackingSettings:
     criterion: str = "paper"
     axis_weight: float = 1.0
     axis_scale: float = 0.10
+    swivel_search: bool = False
 
 
 @dataclass
@@ -238,6 +244,30 @@ class Tracker:
             self.image_criterion = WeightedSum([self.image_task, self.axis_task], [1.0, self.settings.axis_weight],
                                                max_step_size=self.settings.image_step)
         self._target_tasks: dict[str, FramePositionTask] = {}
+        self._hint_tasks: dict[str, FramePositionTask] = {}
+        terms = [(self.image_task, 1.0)]
+        if self.settings.criterion == "two-way":
+            terms.append((self.axis_task, self.settings.axis_weight))
+        self.swivel = SwivelSearch(body, terms)
+
+    def _follow_swivel_hints(self, configuration: Configuration, names: list[str], present: np.ndarray,
+                             levels: list[list]) -> None:
+        """Pull the free elbows and knees to their swivel hints, then solve every level again."""
+        targeted = {name for name, here in zip(names, present) if here}
+        free = [name for name in LIMB_ENDS if name not in targeted]
+        hints = self.swivel.hints(configuration, free)
+        if not hints:
+            return
+        hint_tasks = []
+        for name, position in hints.items():
+            if name not in self._hint_tasks:
+                self._hint_tasks[name] = FramePositionTask(self.body.model, self.body.keypoints[name])
+            self._hint_tasks[name].set_target(position)
+            hint_tasks.append(self._hint_tasks[name])
+        # The hints rank below every end effector, so a hint that cannot be met bends nothing else.
+        hinted = [level for level in levels if self.image_criterion not in level and self.posture not in level]
+        self.solver.solve(configuration, [*hinted, hint_tasks, [self.posture]], iterations=self.settings.iterations)
+        self.solver.solve(configuration, levels, iterations=self.settings.iterations)
 
     def _levels(self, names: list[str]) -> list[list]:
         for name in names:
@@ -318,6 +348,8 @@ class Tracker:
                                   self.settings.first_frame_iterations, self.settings.first_frame_starts)
             else:
                 self.solver.solve(configuration, levels, iterations=self.settings.iterations)
+            if use_image and self.settings.swivel_search:
+                self._follow_swivel_hints(configuration, names, present, levels)
             result.solve_seconds += time.perf_counter() - started
             result.q[frame] = configuration.q
             result.keypoints[frame] = configuration.frame_positions(keypoint_ids)

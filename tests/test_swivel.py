@@ -1,0 +1,75 @@
+"""Tests of the swivel search of free elbows and knees."""
+
+import numpy as np
+import pytest
+
+from ibik_pin.configuration import Configuration
+from ibik_pin.exceptions import InputError
+from ibik_pin.tasks import ImageTask, View
+from ibik_pin.tasks.silhouette_axis import AxisView, SilhouetteAxisTask
+from ibik_pin.tracking.swivel import SwivelSearch, swivel_circle
+from ibik_pin.vision.camera import look_at_camera
+from ibik_pin.vision.medial_axis import medial_axis_pixels
+from ibik_pin.vision.render import render_capsules
+from ibik_pin.vision.support import support_from_mask
+
+
+def test_the_swivel_circle_keeps_both_distances_and_starts_at_the_joint(rng):
+    root, middle, end = rng.normal(size=(3, 3))
+    circle = swivel_circle(root, middle, end, 24)
+    assert circle.shape == (24, 3)
+    np.testing.assert_allclose(circle[0], middle, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(circle - root, axis=1), np.linalg.norm(middle - root), rtol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(circle - end, axis=1), np.linalg.norm(middle - end), rtol=1e-12)
+    assert np.ptp(circle, axis=0).max() > 0.1  # the points really go round
+
+
+def _views(human, q):
+    configuration = Configuration(human.model, q)
+    ends = configuration.frame_positions(human.segment_frame_ids.reshape(-1)).reshape(-1, 2, 3)
+    center = configuration.frame_position(human.frame_id("Hip"))
+    image_views, axis_views = [], []
+    for name, eye in [("front", center + [3.5, 0.3, 0.8]), ("side", center + [0.8, 0.5, -3.8])]:
+        camera = look_at_camera(name, (320, 240), 300.0, eye, center, np.array([0.0, 1.0, 0.0]))
+        mask = render_capsules(camera, ends[:, 0], ends[:, 1], human.segment_radii)
+        image_views.append(View(camera, support_from_mask(mask, inside_cap_px=3.0)))
+        axis_views.append(AxisView(camera, medial_axis_pixels(mask), 8.0))
+    return image_views, axis_views
+
+
+
+
+def test_the_search_hints_the_elbow_back_toward_the_pose_of_the_silhouette(human):
+    import pinocchio as pin
+
+    true_q = pin.neutral(human.model)
+    # Left arm raised sideways and bent: an elbow far from the trunk in both views.
+    for joint, angle in [("left_shoulder_X", -1.2), ("left_elbow_Z", 1.3)]:
+        true_q[human.model.joints[human.model.getJointId(joint)].idx_q] = angle
+    image_views, axis_views = _views(human, true_q)
+    image = ImageTask(human, image_views)
+    axis = SilhouetteAxisTask(human, axis_views)
+    truth = Configuration(human.model, true_q).frame_position(human.frame_id("LElbow")).copy()
+    # The same wrist and shoulder, the elbow swivelled 120 degrees away.
+    configuration = Configuration(human.model, true_q)
+    names = ["LShoulder", "LElbow", "LWrist"]
+    shoulder, elbow, wrist = configuration.frame_positions(human.frame_ids(names))
+    wrong = swivel_circle(shoulder, elbow, wrist, 3)[1]
+    search = SwivelSearch(human, [(image, 1.0), (axis, 1.0)], samples=36)
+
+    class Moved:  # the configuration's positions with the elbow moved, as the search reads them
+        def frame_positions(self, ids):
+            positions = configuration.frame_positions(ids).copy()
+            positions[np.asarray(ids) == human.frame_id("LElbow")] = wrong
+            return positions
+
+    hints = search.hints(Moved(), ["LElbow", "RElbow"])
+    assert "LElbow" in hints
+    assert np.linalg.norm(hints["LElbow"] - truth) < 0.03
+    assert np.linalg.norm(wrong - truth) > 0.2
+    assert "RElbow" not in hints  # already where its silhouette says
+
+
+def test_a_search_needs_three_samples(human):
+    with pytest.raises(InputError, match="at least 3"):
+        SwivelSearch(human, [], samples=2)
