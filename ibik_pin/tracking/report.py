@@ -1,0 +1,269 @@
+"""What `ibik track` did, as a typed record written to OUTDIR/report.json.
+
+Frame numbering: every key or list indexed by frame follows the targets' TRC: a dictionary keyed
+by frame uses the TRC's ``Frame#`` (the first row of a Pose2Sim or OpenSim TRC is frame 1), a
+``per_frame`` list holds one value per TRC row, in file order. Lengths are in metres (keys ending
+in ``_m``), rates in Hz, times in seconds. Values that do not exist (a target absent from every
+frame, a disabled view) are written as JSON null, never as a bare NaN.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ibik_pin.io.files import write_text_atomically
+from ibik_pin.tracking.axes import AXES_DESCRIPTIONS, AxesChoice
+from ibik_pin.tracking.tracker import TrackingResult, TrackingSettings
+
+FRAME_NUMBERING = (
+    "frame keys are the targets TRC's Frame# (the first row of a Pose2Sim/OpenSim TRC is frame 1); "
+    "per_frame lists hold one value per TRC row, in file order"
+)
+
+
+def _finite_or_none(value: float | np.floating) -> float | None:
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+@dataclass
+class ResidualStats:
+    """Distances of model keypoints to their targets over the frames [m].
+
+    Attributes:
+        mean: mean over the frames where the target is present [m]; None if never present.
+        median: median over the same frames [m].
+        max: largest [m].
+        per_frame: one value per frame [m]; None where the target is absent.
+    """
+
+    mean: float | None
+    median: float | None
+    max: float | None
+    per_frame: list[float | None]
+
+    @classmethod
+    def from_values(cls, values_m: np.ndarray) -> ResidualStats:
+        """Statistics of (F,) distances [m], NaN where absent."""
+        values_m = np.asarray(values_m, dtype=float)
+        present = values_m[np.isfinite(values_m)]
+        if present.size == 0:
+            return cls(None, None, None, [None] * len(values_m))
+        return cls(float(np.mean(present)), float(np.median(present)), float(np.max(present)),
+                   [_finite_or_none(value) for value in values_m])
+
+
+@dataclass
+class TrcAxesReport:
+    """The axis convention the TRC files were read and written in (tracking.axes).
+
+    Attributes:
+        used: "y-up" or "z-up".
+        how: "detected", "forced" (--trc-axes) or "default" (no calibration to detect against).
+        decided_by: when detected, what told the conventions apart: "silhouettes", "images" or
+            "upright body".
+        description: the convention in words, and which outputs it applies to.
+        inside_images: per convention, the fraction of the sampled targets' projections in front
+            of a camera and inside its image [0-1]; empty without a calibration.
+        inside_silhouettes: per convention, the fraction inside the silhouettes [0-1]; empty
+            without silhouettes.
+        upright_cosine: per convention, the median cosine between the body's feet-to-head
+            direction and the model's up [-1, 1]; empty without head and foot targets.
+        sampled_frames: TRC frame numbers of the frames these were measured on.
+    """
+
+    used: str
+    how: str
+    decided_by: str
+    description: str
+    inside_images: dict[str, float] = field(default_factory=dict)
+    inside_silhouettes: dict[str, float] = field(default_factory=dict)
+    upright_cosine: dict[str, float] = field(default_factory=dict)
+    sampled_frames: list[int] = field(default_factory=list)
+
+    @classmethod
+    def from_choice(cls, choice: AxesChoice, frame_numbers: np.ndarray) -> TrcAxesReport:
+        description = (f"{AXES_DESCRIPTIONS[choice.axes]}; the targets were read and joints.trc written "
+                       "in it; q.csv, motion.mot and motion.bvh are in the model's frame (Y up)")
+        if choice.how == "default":
+            description += "; no --calibration to detect it against, so Pose2Sim's y-up was assumed"
+
+        def per_axes(name: str) -> dict[str, float]:
+            values = {score.axes: getattr(score, name) for score in choice.scores}
+            return {axes: float(value) for axes, value in values.items() if value is not None}
+
+        return cls(
+            used=choice.axes,
+            how=choice.how,
+            decided_by=choice.decided_by,
+            description=description,
+            inside_images=per_axes("inside_images"),
+            inside_silhouettes=per_axes("inside_silhouettes"),
+            upright_cosine=per_axes("upright"),
+            sampled_frames=[int(frame_numbers[index]) for index in choice.sampled_frames],
+        )
+
+
+@dataclass
+class TrackingReport:
+    """Everything report.json holds; the field names are its keys (see the module docstring).
+
+    Attributes:
+        frames: number of frames tracked.
+        frame_numbering: how frames are numbered in this report.
+        frame_numbers: (F,) the TRC's frame numbers.
+        frame_rate_hz: the TRC's data rate [Hz].
+        times_s: (F,) the TRC's times [s].
+        method: solver scheme.
+        image: whether the image criterion was used.
+        criterion: the image criterion ("paper" or "two-way").
+        iterations_per_frame: solver steps per frame after the first.
+        mask_filter_radius: temporal majority filter radius of the silhouettes [frames].
+        solve_frames_per_second: frames solved per second of solver time [Hz]; None if unmeasured.
+        cameras: the cameras whose images were used (empty when blind).
+        trc_axes: the TRC's axis convention and how it was chosen.
+        end_effector_residual_m: per frame, the mean distance of the present targets to their
+            keypoints, and its statistics over the frames [m].
+        keypoint_residual_m: per target keypoint, its distance to its target [m].
+        overlap_per_view: per camera, the image criterion at each frame's solution (None when
+            the view was disabled).
+        joint_limit_hits: TRC frame number -> joints at a limit (frames without any omitted).
+        frames_with_dropped_targets: TRC frame number -> targets absent in that frame.
+        frames_with_disabled_views: TRC frame number -> cameras whose silhouette was empty.
+    """
+
+    frames: int
+    frame_numbering: str
+    frame_numbers: list[int]
+    frame_rate_hz: float
+    times_s: list[float]
+    method: str
+    image: bool
+    criterion: str
+    iterations_per_frame: int
+    mask_filter_radius: int
+    solve_frames_per_second: float | None
+    cameras: list[str]
+    trc_axes: TrcAxesReport
+    end_effector_residual_m: ResidualStats
+    keypoint_residual_m: dict[str, ResidualStats]
+    overlap_per_view: dict[str, list[float | None]]
+    joint_limit_hits: dict[str, list[str]]
+    frames_with_dropped_targets: dict[str, list[str]]
+    frames_with_disabled_views: dict[str, list[str]]
+
+    @classmethod
+    def from_tracking(
+        cls,
+        result: TrackingResult,
+        settings: TrackingSettings,
+        camera_names: list[str],
+        frame_numbers: np.ndarray,
+        times_s: np.ndarray,
+        frame_rate_hz: float,
+        axes: AxesChoice,
+    ) -> TrackingReport:
+        """The report of one tracking run.
+
+        Args:
+            result: what the tracker returned.
+            settings: how it solved.
+            camera_names: the cameras whose images were used, in the order of result.overlap's
+                columns (empty when blind).
+            frame_numbers: (F,) the TRC's frame numbers; times_s: (F,) its times [s].
+            frame_rate_hz: the TRC's data rate [Hz].
+            axes: the TRC's axis convention.
+        """
+        numbers = [int(number) for number in frame_numbers]
+
+        def by_frame(per_frame: list[list[str]]) -> dict[str, list[str]]:
+            return {str(number): list(items) for number, items in zip(numbers, per_frame, strict=True) if items}
+
+        return cls(
+            frames=len(numbers),
+            frame_numbering=FRAME_NUMBERING,
+            frame_numbers=numbers,
+            frame_rate_hz=float(frame_rate_hz),
+            times_s=[float(time) for time in times_s],
+            method=settings.method,
+            image=bool(settings.use_image and camera_names),
+            criterion=settings.criterion,
+            iterations_per_frame=settings.iterations,
+            mask_filter_radius=settings.mask_filter_radius,
+            solve_frames_per_second=_finite_or_none(result.frames_per_second),
+            cameras=list(camera_names),
+            trc_axes=TrcAxesReport.from_choice(axes, frame_numbers),
+            end_effector_residual_m=ResidualStats.from_values(result.target_residuals),
+            keypoint_residual_m={name: ResidualStats.from_values(result.target_distances[:, index])
+                                 for index, name in enumerate(result.target_names)},
+            overlap_per_view={name: [_finite_or_none(value) for value in result.overlap[:, index]]
+                              for index, name in enumerate(camera_names)},
+            joint_limit_hits=by_frame(result.limit_hits),
+            frames_with_dropped_targets=by_frame(result.dropped_targets),
+            frames_with_disabled_views=by_frame(result.disabled_views),
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """The report as plain JSON values (NaN and infinities as None)."""
+        return _json_ready(dataclasses.asdict(self))
+
+    def to_json(self) -> str:
+        """Strict JSON text (no NaN or Infinity tokens), indented."""
+        return json.dumps(self.to_dict(), indent=2, allow_nan=False) + "\n"
+
+    def write(self, path: str | Path) -> None:
+        """Write to_json() to `path` atomically."""
+        write_text_atomically(path, self.to_json())
+
+    def __getitem__(self, key: str) -> Any:
+        """report.json's value for `key`, for callers that read the report as they read the file."""
+        return self.to_dict()[key]
+
+    def keypoints_worst_first(self) -> list[tuple[str, ResidualStats]]:
+        """The target keypoints by decreasing mean residual (never-present ones last)."""
+        return sorted(self.keypoint_residual_m.items(),
+                      key=lambda item: -item[1].mean if item[1].mean is not None else math.inf)
+
+    def summary_lines(self) -> list[str]:
+        """For the console: frames, speed and mean end-effector residual [mm], then each target
+        keypoint's mean and largest residual [mm], worst first."""
+        speed = (f"{self.solve_frames_per_second:.1f} frames/s" if self.solve_frames_per_second is not None
+                 else "an unmeasured speed")
+        overall = self.end_effector_residual_m.mean
+        lines = [f"{self.frames} frames at {speed}, mean end-effector residual "
+                 + (f"{1000 * overall:.1f} mm" if overall is not None else "not measured (no target present)")]
+        width = max((len(name) for name in self.keypoint_residual_m), default=0)
+        lines.append("mean residual per target keypoint [mm], worst first (max in brackets):")
+        for name, stats in self.keypoints_worst_first():
+            if stats.mean is None or stats.max is None:
+                lines.append(f"  {name:<{width}}  absent in every frame")
+            else:
+                lines.append(f"  {name:<{width}}  {1000 * stats.mean:7.1f}  ({1000 * stats.max:.1f})")
+        return lines
+
+
+def _json_ready(value: Any) -> Any:
+    """Plain JSON values: numpy numbers and arrays converted, NaN and infinities as None."""
+    if isinstance(value, dict):
+        return {str(key): _json_ready(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_ready(item) for item in value]
+    if isinstance(value, np.ndarray):
+        return _json_ready(value.tolist())
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return _finite_or_none(value)
+    return value
+
+
+__all__ = ["FRAME_NUMBERING", "ResidualStats", "TrackingReport", "TrcAxesReport"]
