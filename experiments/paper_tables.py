@@ -17,6 +17,12 @@ Usage: python experiments/paper_tables.py --out out/paper [--data ../shared/data
 
 from __future__ import annotations
 
+import os
+
+# One OpenBLAS thread for the solvers' tiny factorisations, set before numpy is imported: see
+# ibik_pin/cli.py (the library itself leaves the environment alone). A user's setting wins.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 import argparse
 import json
 import time

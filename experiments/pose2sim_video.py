@@ -15,6 +15,12 @@ Usage: python experiments/pose2sim_video.py --out out/pose2sim [--data ../shared
 
 from __future__ import annotations
 
+import os
+
+# One OpenBLAS thread for the solvers' tiny factorisations, set before numpy is imported: see
+# ibik_pin/cli.py (the library itself leaves the environment alone). A user's setting wins.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 import argparse
 import json
 import time
@@ -22,12 +28,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ibik_pin.evaluation import mean_joint_errors_mm
+from ibik_pin.evaluation import ESTIMATED, mean_joint_errors_mm
 from ibik_pin.io.trc import TrcData, read_trc, write_trc
 from ibik_pin.tracking.pipeline import TrackJob, run_track
 from ibik_pin.tracking.tracker import TrackingSettings
 
-ESTIMATED = ["LElbow", "RElbow", "LKnee", "RKnee"]
 VARIANTS = {  # name -> (use the image, cameras)
     "pik": (False, None),
     "ibik_4_views": (True, None),

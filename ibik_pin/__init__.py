@@ -1,10 +1,7 @@
-"""ibik_pin: image-constrained inverse kinematics for human motion capture, on Pinocchio."""
+"""ibik_pin: image-constrained inverse kinematics for human motion capture, on Pinocchio.
 
-import os
-
-# The solvers factor many tiny matrices (at most 42 x 42); OpenBLAS threads only add overhead to
-# those, and on a loaded machine they make each factorisation 20-100 times slower. A user's own
-# setting wins; it takes effect only if numpy has not been imported yet.
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+Importing the package imports nothing heavy and changes nothing in the environment: the `ibik`
+command sets its own OpenBLAS thread count (see :mod:`ibik_pin.cli`).
+"""
 
 __version__ = "0.1.0"

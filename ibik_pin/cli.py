@@ -5,15 +5,31 @@ Bad input ends with one line on stderr and exit code 2; nothing half-written is 
 
 from __future__ import annotations
 
-import argparse
+import os
 import sys
-import warnings
 from pathlib import Path
+
+# The solvers factor many tiny matrices (at most 42 x 42); OpenBLAS threads only add overhead to
+# those, and on a loaded machine they make each factorisation 20-100 times slower. The setting
+# takes effect only before numpy is first imported, hence here, above every import that brings
+# numpy in; and only when this process is the `ibik` command, since a library must leave the
+# environment of the program that imports it alone. A user's own setting wins.
+if __name__ == "__main__" or Path(sys.argv[0]).stem == "ibik":
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse
+import warnings
+from typing import TYPE_CHECKING
 
 from ibik_pin.exceptions import IbikError
 from ibik_pin.solvers import SOLVERS
-from ibik_pin.tracking.pipeline import TrackJob, run_track
-from ibik_pin.tracking.tracker import TrackingSettings
+
+if TYPE_CHECKING:
+    from ibik_pin.tracking.pipeline import TrackJob
+
+# The subcommands' modules (tracking, I/O, rendering, plots, the demo's synthetic data) are
+# imported by the handlers that need them, so that `ibik --help` and argument errors answer at
+# once.
 
 
 def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
@@ -42,6 +58,9 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _job(arguments: argparse.Namespace) -> TrackJob:
+    from ibik_pin.tracking.pipeline import TrackJob
+    from ibik_pin.tracking.tracker import TrackingSettings
+
     if arguments.iterations < 1:
         raise IbikError(f"--iterations must be >= 1, got {arguments.iterations}")
     if arguments.mask_filter < 0:
@@ -86,6 +105,8 @@ def main(argv: list[str] | None = None) -> int:
     warnings.formatwarning = _one_line_warning
     try:
         if arguments.command == "track":
+            from ibik_pin.tracking.pipeline import run_track
+
             report = run_track(_job(arguments))
             if not arguments.quiet:
                 print(f"wrote {arguments.out}: {report['frames']} frames at "

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ibik_pin.evaluation import mean_joint_errors_mm
+from ibik_pin.evaluation import ESTIMATED, mean_joint_errors_mm
 from ibik_pin.io.asf_amc import read_asf_amc
 from ibik_pin.io.trc import TrcData, read_trc, write_trc
 from ibik_pin.model import load_human
@@ -27,7 +27,6 @@ from ibik_pin.tracking.pipeline import TrackJob, run_track
 from ibik_pin.tracking.tracker import TrackingSettings
 
 DATA = Path(__file__).resolve().parent / "data"
-ESTIMATED = ["LElbow", "RElbow", "LKnee", "RKnee"]
 
 
 def prepare_demo_inputs(folder: Path, views: int = 4, frame_step: int = 2, seed: int = 0):

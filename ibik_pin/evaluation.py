@@ -8,6 +8,10 @@ import numpy as np
 
 from ibik_pin.exceptions import InputError
 
+#: The joints left to the image in the paper's real-motion experiments (Section 4): no target is
+#: given for them, and Tables 1 and 2 report their eq. (9) errors.
+ESTIMATED = ("LElbow", "RElbow", "LKnee", "RKnee")
+
 
 def per_frame_errors(estimated: np.ndarray, truth: np.ndarray) -> np.ndarray:
     """Euclidean distance of each joint to its truth, shape (F, K) [units of the inputs].

@@ -1,11 +1,20 @@
-"""Tests of ibik_pin.progress: what the bar draws, when, and when it stays silent."""
+"""Tests of the progress bar of `ibik track` (tqdm): drawn on a terminal with the count, the rate and
+the time left; silent with --quiet and when stderr is not a terminal (a log file, a pipe)."""
+
+from __future__ import annotations
 
 import io
+import re
+import sys
 
 import pytest
 
-from ibik_pin.exceptions import InputError
-from ibik_pin.progress import ProgressBar
+from ibik_pin.cli import main
+from ibik_pin.demo import prepare_demo_inputs
+
+# tqdm's last drawing of a finished bar: "tracking: 100%|####| 10/10 [00:00<00:00, 22.9frame/s]";
+# below 1 frame/s the rate reads "1.23s/frame".
+FINISHED_BAR = re.compile(r"tracking: 100%\|.*\| 10/10 \[\d\d:\d\d<\d\d:\d\d, +[\d.]+(frame/s|s/frame)\]")
 
 
 class Terminal(io.StringIO):
@@ -15,94 +24,40 @@ class Terminal(io.StringIO):
         return True
 
 
-class Clock:
-    """A clock [s] the test moves by hand."""
-
-    def __init__(self) -> None:
-        self.now = 0.0
-
-    def __call__(self) -> float:
-        return self.now
+@pytest.fixture(scope="module")
+def targets(tmp_path_factory):
+    """10 frames of real walking (CMU 35_01 at 5 Hz); only the targets are tracked (no image)."""
+    return prepare_demo_inputs(tmp_path_factory.mktemp("walk") / "input", views=1, frame_step=24).targets
 
 
-def test_the_line_shows_the_count_the_bar_the_rate_and_the_time_left():
-    clock = Clock()
-    bar = ProgressBar(100, "tracking", stream=Terminal(), clock=clock)
-    bar.count = 37
-    clock.now = 3.0
-
-    assert bar.text() == "tracking 37/100 [=======>            ] 12.3 fps ETA 5s"
+def track(targets, out, *extra: str) -> int:
+    return main(["track", "--targets", str(targets), "--no-image", "--out", str(out), *extra])
 
 
-def test_the_time_left_is_written_in_minutes_beyond_a_minute():
-    clock = Clock()
-    bar = ProgressBar(1000, "solving", stream=Terminal(), clock=clock)
-    bar.count = 10
-    clock.now = 1.25
+def test_on_a_terminal_the_bar_shows_the_frames_the_rate_and_the_time_left(targets, tmp_path, monkeypatch):
+    terminal = Terminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
 
-    assert bar.text().endswith("8.0 fps ETA 2m04s")
+    assert track(targets, tmp_path / "out") == 0
 
-
-def test_updates_redraw_at_most_ten_times_per_second_and_closing_ends_the_line():
-    clock, stream = Clock(), Terminal()
-
-    with ProgressBar(1000, "frames", stream=stream, clock=clock) as bar:
-        for _ in range(1000):
-            clock.now += 0.001  # 1000 updates in 1 s
-            bar.update()
-
-    output = stream.getvalue()
-    assert 10 <= output.count("\r") <= 12  # ~10 redraws in 1 s, and the final one
-    assert output.endswith("\n")
-    assert output.rstrip("\n").split("\r")[-1].startswith("frames 1000/1000 [====================]")
-    assert "ETA" not in output.split("\r")[-1]
+    drawings = [line for line in re.split(r"[\r\n]", terminal.getvalue()) if line.startswith("tracking:")]
+    assert drawings, terminal.getvalue()
+    assert FINISHED_BAR.search(drawings[-1]), drawings[-1]
 
 
-def test_a_shorter_line_is_padded_to_clear_the_previous_one():
-    clock, stream = Clock(), Terminal()
-    bar = ProgressBar(10, "x", stream=stream, clock=clock)
-    clock.now = 1.0
-    bar.update()
-    first = stream.getvalue().split("\r")[-1]
-    clock.now = 1000.0
-    bar.update(9)
+def test_quiet_draws_nothing_even_on_a_terminal(targets, tmp_path, monkeypatch, capsys):
+    terminal = Terminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
 
-    second = stream.getvalue().split("\r")[-1]
-    assert len(second) >= len(first)
-
-
-def test_nothing_is_written_when_disabled_or_when_the_stream_is_not_a_terminal():
-    terminal, pipe = Terminal(), io.StringIO()
-
-    with ProgressBar(5, "a", enabled=False, stream=terminal) as disabled:
-        disabled.update(5)
-    with ProgressBar(5, "b", stream=pipe) as not_a_terminal:
-        not_a_terminal.update(5)
+    assert track(targets, tmp_path / "out", "--quiet") == 0
 
     assert terminal.getvalue() == ""
-    assert pipe.getvalue() == ""
-    assert disabled.count == not_a_terminal.count == 5
+    assert capsys.readouterr().out == ""
 
 
-def test_the_line_is_ended_even_when_the_work_fails():
-    stream = Terminal()
+def test_a_log_or_a_pipe_gets_no_bar(targets, tmp_path, capsys):
+    assert track(targets, tmp_path / "out") == 0
 
-    with pytest.raises(RuntimeError):
-        with ProgressBar(5, "failing", stream=stream):
-            raise RuntimeError("solver failed")
-
-    assert stream.getvalue().endswith("\n")
-
-
-def test_the_default_stream_is_standard_error(capsys):
-    with ProgressBar(3, "quiet") as bar:
-        bar.update(3)
-
-    assert capsys.readouterr().err == ""  # captured stderr is not a terminal
-    assert not bar.active
-
-
-@pytest.mark.parametrize("total", [-1, 2.5, "10", True])
-def test_a_total_that_is_not_a_non_negative_integer_is_refused(total):
-    with pytest.raises(InputError, match="total: expected a non-negative integer"):
-        ProgressBar(total)
+    error = capsys.readouterr().err  # captured stderr is not a terminal
+    assert "tracking:" not in error
+    assert "%|" not in error

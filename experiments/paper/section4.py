@@ -26,6 +26,7 @@ import numpy as np
 import pinocchio as pin
 
 from ibik_pin.configuration import Configuration
+from ibik_pin.evaluation import ESTIMATED
 from ibik_pin.exceptions import EmptySilhouetteWarning
 from ibik_pin.io.asf_amc import read_asf_amc
 from ibik_pin.io.bvh import CMU_BVH_SCALE, read_bvh
@@ -158,7 +159,6 @@ def subset_views(views: Views, count: int) -> Views:
     return Views(views.cameras[:count], [frame[:count] for frame in views.masks])
 
 
-ESTIMATED = ["LElbow", "RElbow", "LKnee", "RKnee"]
 
 
 @dataclass

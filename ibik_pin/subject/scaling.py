@@ -90,7 +90,8 @@ _OFFSET_LENGTHS = frozenset({"pelvis_height", "neck_shoulder"})
 #: [m], measured by :func:`neutral_stature` (Head 0.693 m above the root, toes 1.049 m below).
 HUMAN_NEUTRAL_STATURE_M = 1.742
 
-_FOOT_KEYPOINTS = ("LAnkle", "RAnkle", "LHeel", "RHeel", "LBigToe", "RBigToe", "LSmallToe", "RSmallToe")
+#: The keypoints a stature is measured down to: the lowest of them is the sole.
+FOOT_KEYPOINTS = ("LAnkle", "RAnkle", "LHeel", "RHeel", "LBigToe", "RBigToe", "LSmallToe", "RSmallToe")
 _ALL = (1.0, 1.0, 1.0)
 _FORWARD = (1.0, 0.0, 0.0)
 _LATERAL = (0.0, 0.0, 1.0)
@@ -195,10 +196,10 @@ def neutral_stature(body: BodyModel) -> float:
 
     The default human measures :data:`HUMAN_NEUTRAL_STATURE_M` = 1.742 m.
     """
-    feet = [name for name in _FOOT_KEYPOINTS if name in body.keypoints]
+    feet = [name for name in FOOT_KEYPOINTS if name in body.keypoints]
     if "Head" not in body.keypoints or not feet:
         raise InputError(
-            f"body: expected keypoints Head and at least one of {list(_FOOT_KEYPOINTS)} to measure a "
+            f"body: expected keypoints Head and at least one of {list(FOOT_KEYPOINTS)} to measure a "
             f"stature, got {list(body.keypoints)}"
         )
     model = body.model

@@ -17,16 +17,17 @@ from pathlib import Path
 from typing import Sequence
 
 import numpy as np
+from tqdm import tqdm
 
 from ibik_pin.exceptions import FileFormatError, IbikWarning, InputError
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, read_calibration
 from ibik_pin.io.export import write_model_bvh, write_model_mot, write_q_csv
 from ibik_pin.io.masks import IMAGE_SUFFIXES, list_mask_files, read_mask
-from ibik_pin.io.trc import TrcData, read_trc, write_trc
+from ibik_pin.io.trc import METRES_PER_UNIT, TrcData, read_trc, write_trc
 from ibik_pin.io.video import VideoReader
 from ibik_pin.model import BodyModel, load_human
-from ibik_pin.progress import ProgressBar
 from ibik_pin.subject.scaling import (
+    FOOT_KEYPOINTS,
     scale_from_stature,
     scale_human,
     segment_lengths_from_keypoints,
@@ -42,7 +43,6 @@ VIDEO_SUFFIXES = {".mp4", ".avi", ".mov", ".mkv", ".m4v"}
 # Encoders round frame sizes to macroblocks of 16 px: a video up to 15 px off its calibration's
 # size (Pose2Sim's demo: 1080 px wide, calibrated at 1088) is the same sensor, anything more is not.
 CODEC_ALIGNMENT_PX = 16
-UNIT_TO_METRES = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 # The keypoints joints.trc always holds (estimated ones included), then any other of the model's.
 OUTPUT_KEYPOINTS = ["Hip", "Neck", "Head", "LShoulder", "LElbow", "LWrist", "RShoulder", "RElbow",
                     "RWrist", "LHip", "LKnee", "LAnkle", "RHip", "RKnee", "RAnkle"]
@@ -92,9 +92,9 @@ class Silhouettes:
 
 def _trc_in_metres(path: Path) -> tuple[TrcData, np.ndarray]:
     data = read_trc(path)
-    if data.units not in UNIT_TO_METRES:
+    if data.units not in METRES_PER_UNIT:
         raise FileFormatError(f"{path}: units {data.units!r} are not one of m, cm, mm")
-    return data, data.positions * UNIT_TO_METRES[data.units]
+    return data, data.positions * METRES_PER_UNIT[data.units]
 
 
 def _check_names(path: Path, names: Sequence[str], body: BodyModel) -> None:
@@ -158,7 +158,8 @@ def load_silhouettes(job: TrackJob, cameras: list, frame_count: int, progress: b
                         and path.suffix.lower() in IMAGE_SUFFIXES | VIDEO_SUFFIXES):
                     backgrounds[name].append(path)
     masks = []
-    with ProgressBar(len(names), "silhouettes", enabled=progress) as bar:
+    # disable=None draws the bar only when stderr is a terminal, so logs and pipes stay clean.
+    with tqdm(total=len(names), desc="silhouettes", unit="camera", disable=None if progress else True) as bar:
         for name, size in zip(names, sizes):
             with VideoReader(videos[name]) as reader:
                 video_size = tuple(reader.size)
@@ -209,7 +210,7 @@ def _stature(names: list[str], targets_m: np.ndarray) -> float:
     if "Head" not in names:
         return float("nan")
     head = targets_m[:, names.index("Head"), 1]
-    feet = [names.index(n) for n in names if n in {"LAnkle", "RAnkle", "LHeel", "RHeel", "LBigToe", "RBigToe"}]
+    feet = [names.index(n) for n in names if n in FOOT_KEYPOINTS]
     if not feet:
         return float("nan")
     lowest = np.nanmin(targets_m[:, feet, 1], axis=1)
@@ -243,7 +244,7 @@ def run_track(job: TrackJob) -> dict:
 
     settings = job.settings
     tracker = Tracker(body, cameras if use_image else [], settings)
-    with ProgressBar(frame_count, "tracking", enabled=not job.quiet) as bar:
+    with tqdm(total=frame_count, desc="tracking", unit="frame", disable=True if job.quiet else None) as bar:
         result = tracker.track(names, targets_m, silhouettes.frame if use_image else None,
                                progress=bar.update)
 
@@ -280,7 +281,7 @@ def write_outputs(folder: Path, job: TrackJob, trc: TrcData, body: BodyModel, ca
     frame_rate = float(trc.data_rate)
     keypoints = OUTPUT_KEYPOINTS + [n for n in result.keypoint_names if n not in OUTPUT_KEYPOINTS]
     indices = [result.keypoint_names.index(n) for n in keypoints]
-    scale = 1.0 / UNIT_TO_METRES[trc.units]
+    scale = 1.0 / METRES_PER_UNIT[trc.units]
     write_trc(folder / "joints.trc", TrcData(
         marker_names=keypoints, times=times, positions=result.keypoints[:, indices] * scale,
         units=trc.units, data_rate=frame_rate, frame_numbers=trc.frame_numbers,
