@@ -1,4 +1,4 @@
-"""Tests of ibik_pin.io.asf_amc: CMU skeletons and walks, conventions, malformed files."""
+"""Tests of ibik_pin.io.asf and asf_amc: CMU skeletons and walks, conventions, malformed files."""
 
 import re
 

@@ -1,7 +1,10 @@
 """A tracked motion written for other programs: a spreadsheet (CSV), OpenSim (.mot), Blender (BVH).
 
-The motion is a sequence of model configurations q, shape (F, nq), as the tracker returns them.
-Supported joints: a free-flyer root (joint 1, child of the universe), 1-DOF revolute joints
+The motion is a sequence of model configurations q, shape (F, nq), as the tracker returns them;
+the CSV and MOT writers take it with the Pinocchio ``model`` it belongs to and the ``times`` of its
+frames, shape (F,) [s]. Every writer raises an :class:`InputError` when the shapes disagree, a
+value is not finite, a free-flyer quaternion is not of unit norm (within 1e-6), or the file cannot
+be written. Supported joints: a free-flyer root (joint 1, child of the universe), 1-DOF revolute joints
 (``RX``, ``RY``, ``RZ``, unaligned), 1-DOF prismatic joints (CSV and MOT only) and unbounded
 revolute joints (``RUB*``, q = (cos, sin)). Any other joint type raises an :class:`InputError`
 that names the joint.
@@ -120,13 +123,10 @@ def write_q_csv(
 
     Args:
         path: The .csv file to write.
-        model: The model q belongs to.
-        times: Time of each frame, shape (F,) [s].
-        q: Configurations, shape (F, nq).
+        model, times, q: The motion (see the module docstring).
 
     Raises:
-        InputError: The shapes disagree, a value is not finite, the model holds an unsupported
-            joint, or the file cannot be written.
+        InputError: For the reasons the module docstring lists, or an unsupported joint.
     """
     times, q = _check_motion(model, times, q, normalise=False)  # written as given
     table = np.column_stack([times, q])
@@ -150,13 +150,10 @@ def write_model_mot(
 
     Args:
         path: The .mot file to write.
-        model: The model q belongs to.
-        times: Time of each frame, shape (F,) [s].
-        q: Configurations, shape (F, nq).
+        model, times, q: The motion (see the module docstring).
 
     Raises:
-        InputError: The shapes disagree, a value is not finite, a free-flyer quaternion is not
-            of unit norm, the model holds an unsupported joint, or the file cannot be written.
+        InputError: For the reasons the module docstring lists, or an unsupported joint.
     """
     times, q = _check_motion(model, times, q)
     column_names: list[str] = []
