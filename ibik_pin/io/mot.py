@@ -30,6 +30,8 @@ from ibik_pin.io.files import (
     write_text_atomically,
 )
 
+__all__ = ["MotData", "read_mot", "write_mot"]
+
 
 @dataclass
 class MotData:

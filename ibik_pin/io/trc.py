@@ -30,6 +30,8 @@ from ibik_pin.io.files import (
     write_text_atomically,
 )
 
+__all__ = ["METRES_PER_UNIT", "TrcData", "read_trc", "write_trc"]
+
 #: Metres per unit for the units a TRC file may declare.
 METRES_PER_UNIT = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 
