@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import cast
 
 import numpy as np
 
@@ -33,7 +34,7 @@ def as_finite_array(value, shape: tuple[int, ...] | Sequence[tuple[int, ...]], n
     Raises:
         InputError: The value is not numeric, has another shape, or holds NaN or infinity.
     """
-    shapes = [shape] if len(shape) == 0 or isinstance(shape[0], int) else list(shape)
+    shapes = cast(list[tuple[int, ...]], [shape] if len(shape) == 0 or isinstance(shape[0], int) else list(shape))
     try:
         array = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError) as error:

@@ -162,7 +162,7 @@ def test_write_then_read_calibration_gives_the_same_projections(tmp_path):
     cameras_read = read_calibration(path)
     assert [camera.name for camera in cameras_read] == ["distorted", "side view"]
     points = points_in_front(cameras[0], 30, seed=4)
-    for written, read in zip(cameras, cameras_read):
+    for written, read in zip(cameras, cameras_read, strict=True):
         assert read.size == written.size
         np.testing.assert_allclose(read.project(points), written.project(points), rtol=0.0, atol=1e-9)
     assert [p.name for p in tmp_path.iterdir()] == ["calibration.toml"]

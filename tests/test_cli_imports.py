@@ -45,9 +45,10 @@ def test_help_loads_no_plotting_synthetic_data_tracking_or_experiment_code(comma
 
 
 def test_importing_the_library_leaves_the_environment_alone():
-    # proxsuite sets KMP_DUPLICATE_LIB_OK on import: the dependencies are loaded before the snapshot.
+    # Some dependencies change the environment on import (proxsuite sets KMP_DUPLICATE_LIB_OK, cv2
+    # LD_LIBRARY_PATH): they are loaded before the snapshot, so that only the package is judged.
     code = (
-        "import os, numpy, pinocchio, proxsuite\n"
+        "import os, cv2, numpy, pinocchio, proxsuite, scipy\n"
         "before = dict(os.environ)\n"
         "import ibik_pin, ibik_pin.cli, ibik_pin.solvers\n"
         "print(dict(os.environ) == before, os.environ.get('OPENBLAS_NUM_THREADS'))\n"

@@ -132,12 +132,12 @@ def test_an_unknown_source_or_a_missing_joint_is_named():
     motion = EXCERPTS["boxing"]()
     with pytest.raises(UnknownNameError, match="unknown source 'c3d'; known: asf, cmu_bvh, boxing"):
         keypoints_from_motion(motion, "c3d")
-    with pytest.raises(UnknownNameError, match="joint.*'LeftHip'.*absent.*the motion's joints: root"):
+    with pytest.raises(UnknownNameError, match=r"joint.*'LeftHip'.*absent.*the motion's joints: root"):
         keypoints_from_motion(EXCERPTS["asf"](), "cmu_bvh")
 
 
 def test_posing_ten_frames_of_real_walking_fits_every_keypoint_within_3_cm(walking, posed_walking):
-    names, positions, body = walking
+    _, _, body = walking
     q, residuals = posed_walking
     assert q.shape == (10, body.model.nq)
     assert residuals.shape == (10,)
@@ -182,7 +182,7 @@ def test_the_rig_spreads_its_azimuths_and_repeats_with_its_seed():
     gaps = np.diff(np.append(azimuths, azimuths[0] + 2 * np.pi))
     assert np.all(np.abs(np.rad2deg(gaps) - 120.0) <= 30.0 + 1e-9)
     again = humaneva_rig(3, np.array([0.0, 0.9, 0.0]), seed=7, jitter_deg=15.0)
-    assert all(np.array_equal(a.rotation, b.rotation) for a, b in zip(cameras, again))
+    assert all(np.array_equal(a.rotation, b.rotation) for a, b in zip(cameras, again, strict=True))
     other = humaneva_rig(3, np.array([0.0, 0.9, 0.0]), seed=8)
     assert not np.allclose(cameras[0].rotation, other[0].rotation)
 
@@ -212,7 +212,7 @@ def test_rendered_silhouettes_cover_the_projected_keypoints(walking, posed_walki
     q, _ = posed_walking
     cameras = humaneva_rig(2, positions[:, names.index("Hip")].mean(axis=0), seed=1)
     masks = render_silhouettes(body, q[0], cameras)
-    for camera, mask in zip(cameras, masks):
+    for camera, mask in zip(cameras, masks, strict=True):
         assert mask.shape == (480, 640) and mask.dtype == bool
         assert 2000 < mask.sum() < 0.3 * mask.size
         assert np.all(covers(mask, segment_end_pixels(body, q[0], camera)))
@@ -230,11 +230,11 @@ def dataset(tmp_path_factory, walking, posed_walking):
 
 
 def test_the_written_calibration_projects_model_frame_points_to_the_same_pixels(dataset):
-    paths, body, q, cameras = dataset
+    paths, _, _, cameras = dataset
     read_back = cameras_in_frame(read_calibration(paths.calibration), POSE2SIM_TRC_TO_WORLD)
     points = read_trc(paths.truth).positions.reshape(-1, 3)
     assert [camera.name for camera in read_back] == [camera.name for camera in cameras]
-    for original, camera in zip(cameras, read_back):
+    for original, camera in zip(cameras, read_back, strict=True):
         assert np.abs(camera.project(points) - original.project(points)).max() < 1e-6
     # the calibration's world is Pose2Sim's, Z up: the cameras stand 1.5 m up its Z axis
     plain = read_calibration(paths.calibration)
@@ -268,7 +268,7 @@ def test_the_written_masks_are_the_rendered_silhouettes(dataset):
         assert [f.name for f in files] == [f"{i:06d}.png" for i in range(4)]
     for frame, q_frame in enumerate(q):
         rendered = render_silhouettes(body, q_frame, cameras)
-        for camera, expected in zip(cameras, rendered):
+        for camera, expected in zip(cameras, rendered, strict=True):
             mask = read_mask(paths.masks / camera.name / f"{frame:06d}.png", camera.size)
             assert np.array_equal(mask, expected)
             assert mask.any()
@@ -292,7 +292,7 @@ def test_target_noise_has_the_requested_spread_and_repeats_with_the_seed(tmp_pat
 def test_write_dataset_refuses_an_unknown_target(tmp_path, walking, posed_walking):
     _, _, body = walking
     camera = humaneva_rig(1, np.zeros(3))
-    with pytest.raises(UnknownNameError, match="unknown keypoint.*'LeftHand'"):
+    with pytest.raises(UnknownNameError, match=r"unknown keypoint.*'LeftHand'"):
         write_dataset(tmp_path, body, posed_walking[0][:1], camera, 100.0, ["LeftHand"])
 
 
@@ -352,7 +352,7 @@ def test_no_defect_leaves_the_mask_and_the_input_is_never_modified(silhouette, r
 
 
 @pytest.mark.parametrize(
-    "arguments, message",
+    ("arguments", "message"),
     [
         ({"erode_px": -1}, "erode_px: expected a non-negative integer"),
         ({"holes": 1.5}, "holes: expected a non-negative integer"),
@@ -373,7 +373,7 @@ def test_a_dataset_with_defects_repeats_with_its_seed(tmp_path, walking, posed_w
     first = write_dataset(tmp_path / "a", body, q, cameras, 120.0, ["Hip"], defects=defects, seed=3)
     second = write_dataset(tmp_path / "b", body, q, cameras, 120.0, ["Hip"], defects=defects, seed=3)
     clean = render_silhouettes(body, q[1], cameras)
-    for camera, rendered in zip(cameras, clean):
+    for camera, rendered in zip(cameras, clean, strict=True):
         a = read_mask(first.masks / camera.name / "000001.png")
         assert np.array_equal(a, read_mask(second.masks / camera.name / "000001.png"))
         assert not np.array_equal(a, rendered)

@@ -83,6 +83,7 @@ def read_asf_amc(
     parents = [-1]
     for index, name in enumerate(skeleton.bone_order, start=1):
         bone = skeleton.bones[name]
+        assert bone.parent is not None  # read_asf gives every bone a parent or raises
         parent = index_of[bone.parent]
         parents.append(parent)
         rest = _rest_rotation(bone.axis_angles * to_radians, bone.axis_order)

@@ -156,7 +156,7 @@ class _HierarchyParser:
                 f"{self.path}, line {self._line()}: CHANNELS of {name!r}: expected "
                 f"{count_token} distinct names among {CHANNEL_NAMES}, got {channels}"
             )
-        self.channels[index] = canonical
+        self.channels[index] = [channel for channel in canonical if channel is not None]  # none is, checked above
         while True:
             token = self._next("JOINT, End Site or '}'")
             if token.upper() == "JOINT":

@@ -109,11 +109,11 @@ def _camera_from_section(path: Path, section: str, table: dict) -> PinholeCamera
     rvec = value("rotation", (3,), "Rodrigues vector, world to camera")
     tvec = value("translation", (3,), "world to camera [m]")
     try:
-        size = as_image_size(size.tolist())
+        size_px = as_image_size(size.tolist())
     except InputError as error:
         raise FileFormatError(f"{where}, key 'size': {_detail(error)}") from None
     try:
-        return PinholeCamera.from_rodrigues(name, size, intrinsics, distortion, rvec, tvec)
+        return PinholeCamera.from_rodrigues(name, size_px, intrinsics, distortion, rvec, tvec)
     except InputError as error:
         parameter = str(error).split(":")[0]
         key = {"intrinsics": "matrix", "distortion": "distortions", "rvec": "rotation"}.get(parameter, parameter)

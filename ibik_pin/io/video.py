@@ -34,7 +34,7 @@ class VideoReader:
         self.path = Path(path)
         if not self.path.is_file():
             raise FileFormatError(f"video file '{self.path}': expected a readable video, found no such file")
-        self._capture = self._open()
+        self._capture: cv2.VideoCapture | None = self._open()
         self.frame_count = int(self._capture.get(cv2.CAP_PROP_FRAME_COUNT))
         self.size = (
             int(self._capture.get(cv2.CAP_PROP_FRAME_WIDTH)),

@@ -83,7 +83,7 @@ def apply_defects(
     mask = np.asarray(mask)
     if mask.ndim != 2 or mask.dtype != np.bool_:
         raise InputError(f"mask: expected an (H, W) bool array, got shape {mask.shape} and dtype {mask.dtype}")
-    image = mask.astype(np.uint8)
+    image: np.ndarray = mask.astype(np.uint8)
     if limb_masks and rng.random() < defects.missing_limb_probability:
         lost = np.asarray(limb_masks[int(rng.integers(len(limb_masks)))], dtype=bool)
         if lost.shape != mask.shape:

@@ -21,7 +21,7 @@ from ibik_pin.io.skeleton import SkeletonMotion
 from ibik_pin.limits import JointLimits
 from ibik_pin.model import BodyModel
 from ibik_pin.solvers import make_solver
-from ibik_pin.tasks import FramePositionTask, PostureTask
+from ibik_pin.tasks import FramePositionTask, PostureTask, Task
 
 __all__ = ["KEYPOINT_SOURCES", "UP", "facing_directions", "keypoints_from_motion", "pose_model_to_keypoints"]
 
@@ -192,7 +192,7 @@ def pose_model_to_keypoints(
     model = body.model
     tasks = [FramePositionTask(model, body.keypoints[name]) for name in names]
     posture = PostureTask(model, weight=posture_weight)
-    levels = [tasks, [posture]]
+    levels: list[list[Task]] = [list(tasks), [posture]]
     solver = make_solver("qp", limits=JointLimits(model))
 
     configuration = Configuration(model)

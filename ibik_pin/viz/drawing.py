@@ -55,9 +55,9 @@ def draw_skeleton(
         raise InputError(f"thickness: expected a positive integer [px], found {thickness!r}")
     finite = np.isfinite(starts).all(axis=1) & np.isfinite(ends).all(axis=1)
     fixed_starts, fixed_ends = to_fixed_point(starts[finite]), to_fixed_point(ends[finite])
-    color = tuple(int(c) for c in color)
+    bgr = tuple(int(c) for c in color)
     for start, end in zip(fixed_starts.tolist(), fixed_ends.tolist(), strict=True):
-        cv2.line(image, tuple(start), tuple(end), color, int(thickness), cv2.LINE_AA, FIXED_POINT_SHIFT)
+        cv2.line(image, tuple(start), tuple(end), bgr, int(thickness), cv2.LINE_AA, FIXED_POINT_SHIFT)
     return image
 
 

@@ -68,8 +68,8 @@ def write_overlay_video(
         raise InputError(f"fps: expected a positive number [Hz], got {fps}")
     if frames_bgr is None and masks is None:
         raise InputError("frames_bgr, masks: expected images, masks or both, got neither")
-    sources = {"skeletons": skeletons, "frames_bgr": frames_bgr, "masks": masks}
-    sources = {name: iter(source) for name, source in sources.items() if source is not None}
+    given: dict[str, Iterable[object] | None] = {"skeletons": skeletons, "frames_bgr": frames_bgr, "masks": masks}
+    sources = {name: iter(source) for name, source in given.items() if source is not None}
 
     def write(temporary: Path) -> int:
         writer = None
@@ -138,6 +138,7 @@ def _overlay_frame(
                 )
             image = overlay_mask(image, mask, color=mask_color, alpha=0.4)
     else:
+        assert mask is not None  # write_overlay_video refuses neither images nor masks
         image = np.zeros((*mask.shape, 3), np.uint8)
         image[mask] = _MASK_GREY
     skeleton = item["skeletons"]
@@ -153,7 +154,7 @@ def _open_video_writer(
     temporary: Path, path: str | os.PathLike[str], fps: float, size: tuple[int, int]
 ) -> cv2.VideoWriter:
     try:
-        writer = cv2.VideoWriter(str(temporary), cv2.VideoWriter_fourcc(*"mp4v"), float(fps), size)
+        writer = cv2.VideoWriter(str(temporary), cv2.VideoWriter.fourcc(*"mp4v"), float(fps), size)
     except cv2.error as error:
         raise FileFormatError(f"{path}: OpenCV cannot write an mp4v video: {error}") from None
     if not writer.isOpened():
