@@ -51,6 +51,11 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mask-filter", type=int, default=0, metavar="R",
                         help="vote each silhouette pixel over the 2R+1 frames around it, to remove "
                              "segmentation flicker (default 0: off)")
+    parser.add_argument("--trc-axes", choices=("auto", "y-up", "z-up"), default="auto",
+                        help="axis convention of the TRC files: y-up as Pose2Sim and OpenSim write "
+                             "them, z-up in the calibration's own world (as many mocap systems "
+                             "export); auto (default) tells them apart by projecting the targets "
+                             "into the cameras (y-up without --calibration)")
     parser.add_argument("--overlay", action="store_true",
                         help="also write overlay videos, a residual plot and an HTML 3D replay")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -81,6 +86,7 @@ def _job(arguments: argparse.Namespace) -> TrackJob:
                                   use_image=not arguments.no_image, mask_filter_radius=arguments.mask_filter),
         overlay=arguments.overlay,
         quiet=arguments.quiet,
+        trc_axes=arguments.trc_axes,
     )
 
 
@@ -111,9 +117,9 @@ def main(argv: list[str] | None = None) -> int:
 
             report = run_track(_job(arguments))
             if not arguments.quiet:
-                print(f"wrote {arguments.out}: {report['frames']} frames at "
-                      f"{report['solve_frames_per_second']:.1f} frames/s, mean end-effector residual "
-                      f"{1000 * report['end_effector_residual_m']['mean']:.1f} mm")
+                lines = report.summary_lines()
+                print(f"wrote {arguments.out}: {lines[0]}")
+                print("\n".join(lines[1:]))
         else:
             from ibik_pin.demo import run_demo
 

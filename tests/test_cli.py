@@ -83,12 +83,14 @@ def test_joints_trc_has_one_row_per_input_frame_with_the_input_times(dataset, ru
     assert joints.units == targets.units
 
 
-def test_the_report_and_mot_are_readable(runs):
+def test_the_report_and_mot_are_readable(dataset, runs):
     folder, _ = runs
     report = json.loads((folder / "ibik" / "report.json").read_text())
     assert report["frames"] == 30 and report["image"] is True
     assert report["end_effector_residual_m"]["mean"] < 0.01
     assert set(report["overlap_per_view"]) == {"cam1", "cam2"}
+    assert set(report["keypoint_residual_m"]) == set(read_trc(dataset.targets).marker_names)
+    assert report["trc_axes"]["used"] == "y-up" and report["trc_axes"]["how"] == "detected"
     mot = read_mot(folder / "ibik" / "motion.mot")
     assert mot.in_degrees and mot.values.shape[0] == 30
 
@@ -132,7 +134,9 @@ def test_an_occluded_target_is_dropped_for_that_frame_and_reported(dataset, tmp_
     arguments[arguments.index("--targets") + 1] = str(path)
     assert main(arguments) == 0
     report = json.loads((tmp_path / "out" / "report.json").read_text())
-    assert report["frames_with_dropped_targets"] == {"3": ["LWrist"]}
+    # Row 3 (0-based) of a TRC whose frame numbers start at 1 is frame 4.
+    assert report["frames_with_dropped_targets"] == {"4": ["LWrist"]}
+    assert report["keypoint_residual_m"]["LWrist"]["per_frame"][3] is None
 
 
 def run_bad(arguments, capsys) -> str:

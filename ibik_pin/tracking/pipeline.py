@@ -7,9 +7,9 @@ a failure never leaves an OUTDIR that looks complete and never destroys a previo
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
+import sys
 import tempfile
 import warnings
 from dataclasses import dataclass, field
@@ -32,6 +32,8 @@ from ibik_pin.subject.scaling import (
     scale_human,
     segment_lengths_from_keypoints,
 )
+from ibik_pin.tracking.axes import AxesChoice, choose_axes
+from ibik_pin.tracking.report import TrackingReport
 from ibik_pin.tracking.tracker import Tracker, TrackingResult, TrackingSettings
 from ibik_pin.vision.camera import cameras_in_frame, select_cameras
 from ibik_pin.vision.segmentation import silhouettes_from_video
@@ -50,7 +52,12 @@ OUTPUT_KEYPOINTS = ["Hip", "Neck", "Head", "LShoulder", "LElbow", "LWrist", "RSh
 
 @dataclass
 class TrackJob:
-    """Everything `ibik track` was asked to do (paths as given on the command line)."""
+    """Everything `ibik track` was asked to do (paths as given on the command line).
+
+    `trc_axes` is the TRC files' axis convention: "auto" (detected against the calibration's
+    cameras; y-up without a calibration), "y-up" (Pose2Sim, OpenSim) or "z-up" (the calibration's
+    own world); see tracking.axes.
+    """
 
     targets: Path
     out: Path
@@ -64,6 +71,7 @@ class TrackJob:
     settings: TrackingSettings = field(default_factory=TrackingSettings)
     overlay: bool = False
     quiet: bool = False
+    trc_axes: str = "auto"
 
 
 @dataclass
@@ -217,14 +225,13 @@ def _stature(names: list[str], targets_m: np.ndarray) -> float:
     return float(np.nanmedian(head - lowest))
 
 
-def run_track(job: TrackJob) -> dict:
+def run_track(job: TrackJob) -> TrackingReport:
     """Run the whole job; returns the report that was written to OUTDIR/report.json."""
-    trc, targets_m = _trc_in_metres(job.targets)
+    trc, targets_trc_m = _trc_in_metres(job.targets)
     names = list(trc.marker_names)
-    frame_count = targets_m.shape[0]
+    frame_count = targets_trc_m.shape[0]
     if frame_count == 0:
         raise InputError(f"--targets {job.targets}: no frame")
-    body = prepare_body(job, names, targets_m)
     cameras: list = []
     silhouettes = None
     use_image = job.settings.use_image
@@ -241,6 +248,13 @@ def run_track(job: TrackJob) -> dict:
         silhouettes = load_silhouettes(job, cameras, frame_count, not job.quiet)
     elif job.overlay and cameras and (job.masks is not None or job.videos is not None):
         silhouettes = load_silhouettes(job, cameras, frame_count, not job.quiet)
+    # The cameras project model-frame points whatever the TRC's convention: only the targets turn.
+    axes = choose_axes(job.trc_axes, names, targets_trc_m, cameras,
+                       silhouettes.frame if silhouettes is not None else None)
+    if not job.quiet:
+        print(f"ibik: TRC axes: {axes.describe()}", file=sys.stderr)
+    targets_m = axes.to_model(targets_trc_m)
+    body = prepare_body(job, names, targets_m)
 
     settings = job.settings
     tracker = Tracker(body, cameras if use_image else [], settings)
@@ -254,7 +268,7 @@ def run_track(job: TrackJob) -> dict:
     os.umask(umask)
     staging.chmod(0o777 & ~umask)  # mkdtemp's 0700 would make OUTDIR private
     try:
-        report = write_outputs(staging, job, trc, body, cameras, silhouettes, result)
+        report = write_outputs(staging, job, trc, body, cameras, silhouettes, result, axes)
         _replace_folder(staging, job.out)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
@@ -275,42 +289,26 @@ def _replace_folder(staging: Path, out: Path) -> None:
 
 
 def write_outputs(folder: Path, job: TrackJob, trc: TrcData, body: BodyModel, cameras: list,
-                  silhouettes: Silhouettes | None, result: TrackingResult) -> dict:
-    """joints.trc, q.csv, motion.mot, motion.bvh, report.json (and the overlays) into `folder`."""
+                  silhouettes: Silhouettes | None, result: TrackingResult, axes: AxesChoice) -> TrackingReport:
+    """joints.trc (in the TRC's own axis convention), q.csv, motion.mot, motion.bvh (model frame,
+    Y up), report.json (and the overlays) into `folder`."""
     times = np.asarray(trc.times, dtype=float)
     frame_rate = float(trc.data_rate)
     keypoints = OUTPUT_KEYPOINTS + [n for n in result.keypoint_names if n not in OUTPUT_KEYPOINTS]
     indices = [result.keypoint_names.index(n) for n in keypoints]
     scale = 1.0 / METRES_PER_UNIT[trc.units]
     write_trc(folder / "joints.trc", TrcData(
-        marker_names=keypoints, times=times, positions=result.keypoints[:, indices] * scale,
+        marker_names=keypoints, times=times, positions=axes.to_trc(result.keypoints[:, indices]) * scale,
         units=trc.units, data_rate=frame_rate, frame_numbers=trc.frame_numbers,
     ))
     write_q_csv(folder / "q.csv", body.model, times, result.q)
     write_model_mot(folder / "motion.mot", body.model, times, result.q)
     write_model_bvh(folder / "motion.bvh", body, result.q, 1.0 / frame_rate)
-    report = {
-        "frames": int(len(times)),
-        "method": job.settings.method,
-        "image": bool(job.settings.use_image),
-        "iterations_per_frame": job.settings.iterations,
-        "mask_filter_radius": job.settings.mask_filter_radius,
-        "solve_frames_per_second": result.frames_per_second,
-        "cameras": [camera.name for camera in cameras] if job.settings.use_image else [],
-        "end_effector_residual_m": {
-            "mean": float(np.nanmean(result.target_residuals)),
-            "max": float(np.nanmax(result.target_residuals)),
-            "per_frame": [float(r) for r in result.target_residuals],
-        },
-        "overlap_per_view": {
-            camera.name: [None if np.isnan(v) else float(v) for v in result.overlap[:, index]]
-            for index, camera in enumerate(cameras) if job.settings.use_image
-        },
-        "joint_limit_hits": {str(frame): hits for frame, hits in enumerate(result.limit_hits) if hits},
-        "frames_with_dropped_targets": {str(f): d for f, d in enumerate(result.dropped_targets) if d},
-        "frames_with_disabled_views": {str(f): d for f, d in enumerate(result.disabled_views) if d},
-    }
-    (folder / "report.json").write_text(json.dumps(report, indent=2))
+    report = TrackingReport.from_tracking(
+        result, job.settings, [camera.name for camera in cameras] if job.settings.use_image else [],
+        trc.frame_numbers, times, frame_rate, axes,
+    )
+    report.write(folder / "report.json")
     if job.overlay:
         write_overlays(folder, job, body, cameras, silhouettes, result, times, frame_rate)
     return report
