@@ -31,6 +31,7 @@ import numpy as np
 
 from ibik_pin.exceptions import IbikWarning, InputError
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD
+from ibik_pin.subject.scaling import FOOT_KEYPOINTS
 
 TRC_AXES = ("y-up", "z-up")
 AXES_DESCRIPTIONS = {
@@ -55,7 +56,6 @@ DECISION_MARGIN = 0.1
 MIN_UPRIGHT = float(np.cos(np.pi / 4))
 SAMPLE_FRAMES = 10
 HEAD_KEYPOINTS = ("Head", "Nose", "Neck")
-FOOT_KEYPOINTS = ("LAnkle", "RAnkle", "LHeel", "RHeel", "LBigToe", "RBigToe", "LSmallToe", "RSmallToe")
 
 SilhouetteSource = Callable[[int], Sequence[np.ndarray]]
 
