@@ -109,3 +109,33 @@ def test_the_chain_on_its_own_silhouette_scores_the_inside_cap():
     value = task.compute_value(Configuration(scene.body.model, q))
     assert 1.5 < value <= 3.0
     assert render_chain(scene.body, scene.camera, q).sum() > 0
+
+
+class RenamedCamera:
+    """A camera by composition, not a subclass of vision.camera.Camera: the View asks only for
+    the CameraLike protocol (name, size, project, project_with_jacobian, pixel_radius)."""
+
+    def __init__(self, camera, name):
+        self._camera, self.name, self.size = camera, name, camera.size
+
+    def project(self, points_world):
+        return self._camera.project(points_world)
+
+    def project_with_jacobian(self, points_world):
+        return self._camera.project_with_jacobian(points_world)
+
+    def pixel_radius(self, points_world, radii):
+        return self._camera.pixel_radius(points_world, radii)
+
+
+def test_any_camera_of_the_protocol_serves_a_view():
+    q = np.array([0.4, 0.3, -0.9, 0.7])
+    scene = make_scene(np.array([0.9, -0.7, -0.6, 0.5]))
+    configuration = Configuration(scene.body.model, q)
+    task = ImageTask(scene.body, [View(RenamedCamera(scene.camera, "wrapped"), scene.support)])
+    reference = ImageTask(scene.body, [View(scene.camera, scene.support)])
+    assert task.compute_value(configuration) == reference.compute_value(configuration)
+    np.testing.assert_array_equal(task.compute_gradient(configuration), reference.compute_gradient(configuration))
+    small = SupportImage(np.zeros((240, 320), dtype=np.float32))
+    with pytest.raises(InputError, match="camera 'wrapped': the support image"):
+        View(RenamedCamera(scene.camera, "wrapped"), small)

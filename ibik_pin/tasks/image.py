@@ -15,8 +15,8 @@ interpolant that reads I_c.
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
@@ -24,6 +24,8 @@ from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.tasks.base import GradientTask
+from ibik_pin.vision.camera import CameraLike
+from ibik_pin.vision.support import SupportImageLike
 
 
 @dataclass
@@ -31,21 +33,23 @@ class View:
     """One calibrated camera and the support image the criterion reads in it.
 
     Attributes:
-        camera: a camera with `project_with_jacobian(points_world (N,3))` returning pixels (N,2),
-            d pixels / d X_world (N,2,3) and depth (N,), and `size` = (width, height) [px].
-        support: a support image with `sample(pixels (N,2))` -> (values (N,), gradient (N,2))
-            and `enabled` (False for an empty silhouette).
+        camera: the camera (vision.camera.CameraLike: a pinhole or orthographic camera).
+        support: its support image, of the camera's size (vision.support.SupportImageLike); one
+            that is not `enabled` (an empty silhouette) is skipped.
+
+    Raises:
+        InputError: the support image's size is not the camera's.
     """
 
-    camera: object
-    support: object
+    camera: CameraLike
+    support: SupportImageLike
 
     def __post_init__(self) -> None:
-        support_size = tuple(getattr(self.support, "size", ()))
+        support_size = tuple(self.support.size)
         camera_size = tuple(self.camera.size)
         if support_size != camera_size:
             raise InputError(
-                f"camera {getattr(self.camera, 'name', '?')!r}: the support image (mask) is "
+                f"camera {self.camera.name!r}: the support image (mask) is "
                 f"{support_size[0]} x {support_size[1]} px but the camera's image is "
                 f"{camera_size[0]} x {camera_size[1]} px (width x height)"
             )
@@ -102,14 +106,14 @@ class ImageTask(GradientTask):
         """Replace the views (e.g. the next frame's supports); empty silhouettes are skipped."""
         self.views = list(views)
         for view in self.views:
-            if not getattr(view.support, "enabled", True):
+            if not view.support.enabled:
                 warnings.warn(
-                    f"camera {getattr(view.camera, 'name', '?')!r}: the silhouette is empty, "
+                    f"camera {view.camera.name!r}: the silhouette is empty, "
                     "the image term is disabled for this view",
                     EmptySilhouetteWarning,
                     stacklevel=2,
                 )
-        self._active_views = [v for v in self.views if getattr(v.support, "enabled", True)]
+        self._active_views = [v for v in self.views if v.support.enabled]
         self.enabled = bool(self._active_views)
         self._cache_version = -1
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 import dataclasses
 import sys
 from dataclasses import dataclass
-from typing import NamedTuple, Sequence
+from typing import NamedTuple, Protocol, Sequence
 
 import cv2
 import numpy as np
@@ -47,6 +47,34 @@ class Projection(NamedTuple):
     pixels: np.ndarray
     jacobian: np.ndarray
     depth: np.ndarray
+
+
+class CameraLike(Protocol):
+    """What the image tasks need of a camera; :class:`PinholeCamera` and
+    :class:`OrthographicCamera` satisfy it, as may any other projection.
+
+    Attributes:
+        name: the camera's name, used in messages and reports.
+        size: (width, height) of the image [px].
+    """
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def size(self) -> tuple[int, int]: ...
+
+    def project(self, points_world: np.ndarray) -> np.ndarray:
+        """(N, 2) pixels (u, v) [px] of (N, 3) world points [m]."""
+        ...
+
+    def project_with_jacobian(self, points_world: np.ndarray) -> Projection:
+        """Pixels (N, 2) [px], their Jacobian (N, 2, 3) [px/m] and depth (N,) [m] of (N, 3) world points [m]."""
+        ...
+
+    def pixel_radius(self, points_world: np.ndarray, radii: np.ndarray) -> np.ndarray:
+        """(N,) image radii [px] of spheres centred at (N, 3) world points [m] with radii (N,) [m]."""
+        ...
 
 
 

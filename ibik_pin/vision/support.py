@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import NamedTuple, Protocol
 
 import cv2
 import numpy as np
@@ -31,6 +31,25 @@ class SupportSample(NamedTuple):
 
     values: np.ndarray
     gradient: np.ndarray
+
+
+class SupportImageLike(Protocol):
+    """What the image criterion needs of a support image; :class:`SupportImage` satisfies it.
+
+    Attributes:
+        size: (width, height) of the image [px]; must be its camera's.
+        enabled: False when the view has no usable silhouette: the image term skips the view.
+    """
+
+    @property
+    def size(self) -> tuple[int, int]: ...
+
+    @property
+    def enabled(self) -> bool: ...
+
+    def sample(self, pixels: np.ndarray) -> SupportSample:
+        """Values (N,) and gradient (N, 2) d values / d (u, v) at (N, 2) pixels [px]."""
+        ...
 
 
 
