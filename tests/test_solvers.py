@@ -2,14 +2,17 @@ import numpy as np
 import pytest
 
 from ibik_pin.configuration import Configuration
-from ibik_pin.exceptions import InputError, UnknownNameError
+from ibik_pin.exceptions import InputError, SolverError, UnknownNameError
 from ibik_pin.limits import JointLimits
 from ibik_pin.model import load_arm
 from ibik_pin.solvers import (
+    DEFAULT_DAMPING,
+    SOLVERS,
     DampedLeastSquaresSolver,
     HierarchicalQPSolver,
     LiegeoisSolver,
     PriorityStackSolver,
+    StepAdaptation,
     make_solver,
 )
 from ibik_pin.tasks import FramePositionTask, GradientTask, PostureTask
@@ -68,11 +71,8 @@ def test_qp_and_projection_stack_give_the_same_step_when_no_limit_is_active(huma
         levels = human_levels(human, random_human_configuration(human, rng))
         levels.insert(2, [FrameHeight(human, "RElbow")])
         configuration = Configuration(human.model, random_human_configuration(human, rng))
+        # Each solver adapts its own image step: the stack's step leaves the QP's untouched.
         stack_step = PriorityStackSolver().compute_step(configuration, levels).dq
-        for level in levels:
-            for task in level:
-                if isinstance(task, GradientTask):
-                    task.reset()
         qp_step = HierarchicalQPSolver().compute_step(configuration, levels).dq
         assert np.max(np.abs(stack_step - qp_step)) < 1e-6
 
@@ -90,41 +90,51 @@ def test_every_scheme_reaches_reachable_targets(human):
         assert result.iterations == 60
 
 
-def test_qp_keeps_every_step_inside_the_joint_limits(human):
-    """10,000 seeded steps: reachable and unreachable targets, starts at and beyond the limits."""
+def test_qp_keeps_every_step_inside_the_joint_limits(human, monkeypatch):
+    """Seeded episodes of four kinds, two of each: reachable targets, unreachable targets, starts
+    on the limits, starts beyond them; every step must end inside the limits and the bounds must
+    actually reach proxsuite (not only the unconstrained shortcut) in every kind."""
     rng = np.random.default_rng(2024)
     limits = JointLimits(human.model)
     solver = HierarchicalQPSolver(limits=limits)
+    kinds = ["reachable", "unreachable", "on the limits", "beyond the limits"]
+    qp_solves = dict.fromkeys(kinds, 0)
+    solve_level = solver._solve_level
+
+    def counting_solve_level(*arguments):
+        qp_solves[kind] += 1
+        return solve_level(*arguments)
+
+    monkeypatch.setattr(solver, "_solve_level", counting_solve_level)
     relaxed_seen = 0
-    for episode in range(100):
-        kind = episode % 4
+    for episode in range(8):
+        kind = kinds[episode % 4]
         levels = human_levels(human, random_human_configuration(human, rng, spread=1.0))
-        if kind == 1:  # unreachable: hands and head 2-3 m away
+        if kind == "unreachable":  # hands and head 2-3 m away
             for task in levels[1]:
                 task.set_target(task.target + rng.uniform(2.0, 3.0, 3) * rng.choice([-1, 1], 3))
         q = random_human_configuration(human, rng, spread=1.0)
-        if kind == 2:  # exactly at a limit on half of the joints
+        if kind == "on the limits":  # exactly at a limit on half of the joints
             at = rng.random(limits.q_index.size) < 0.5
             q[limits.q_index[at]] = np.where(rng.random(at.sum()) < 0.5, limits.lower[at], limits.upper[at])
-        if kind == 3:  # outside the limits by up to 1 rad
+        if kind == "beyond the limits":  # outside by up to 1 rad on 30 % of the joints
             out = rng.random(limits.q_index.size) < 0.3
             q[limits.q_index[out]] = np.where(
                 rng.random(out.sum()) < 0.5,
                 limits.lower[out] - rng.uniform(0, 1, out.sum()),
                 limits.upper[out] + rng.uniform(0, 1, out.sum()),
             )
+            assert limits.violation(q) > 0.1
         configuration = Configuration(human.model, q)
-        for _ in range(100):
-            was_inside = limits.violation(configuration.q) <= 1e-9
+        for _ in range(12):
             step = solver.compute_step(configuration, levels)
             q_next = configuration.integrate(step.dq)
-            if was_inside:
-                assert limits.violation(q_next) <= 1e-9
-            else:  # a start outside the limits is brought back by the first step
-                assert limits.violation(q_next) <= 1e-9
-            relaxed_seen += kind == 1 and step.levels[1].status == "relaxed"
+            # Inside stays inside; a start outside is brought back by the first step.
+            assert limits.violation(q_next) <= 1e-9, kind
+            relaxed_seen += kind == "unreachable" and step.levels[1].status == "relaxed"
             configuration.update(q_next)
     assert relaxed_seen > 0
+    assert min(qp_solves.values()) > 0, qp_solves
 
 
 def test_an_unreachable_level_is_reported_relaxed_and_the_higher_one_solved(human):
@@ -219,8 +229,113 @@ def test_the_image_step_halves_when_its_projected_direction_reverses(solver_name
     wrist.set_target(configuration.frame_position(body.frame_id("Wrist")).copy())
     criterion = PullingAgainstTheWrist(wrist)
     start = configuration.q.copy()
-    make_solver(solver_name, limits=JointLimits(body.model)).solve(configuration, [[wrist], [criterion]], iterations=12)
+    solver = make_solver(solver_name, limits=JointLimits(body.model))
+    solver.solve(configuration, [[wrist], [criterion]], iterations=12)
     # The raw gradient never reverses; the direction actually taken does, so the step halves at
     # every iteration (down to its floor) and the arm moves less than two first steps in all.
-    assert criterion.step_size == pytest.approx(criterion.min_step_size)
+    assert solver.step_adaptation.step_size(criterion) == pytest.approx(criterion.min_step_size)
     assert np.linalg.norm(configuration.q - start) < 2 * 0.05
+
+
+@pytest.mark.parametrize("name", list(SOLVERS))
+def test_every_solver_is_built_with_the_same_keyword_only_arguments(human, name):
+    limits = JointLimits(human.model)
+    solver = SOLVERS[name](limits=limits, damping=0.1)
+    assert (solver.limits, solver.damping) == (limits, 0.1)
+    assert SOLVERS[name]().damping == DEFAULT_DAMPING
+    assert make_solver(name, damping=0.2).damping == 0.2
+    with pytest.raises(TypeError):
+        SOLVERS[name](limits)
+    with pytest.raises(TypeError):
+        make_solver(name, limits)
+
+
+@pytest.mark.parametrize("name", list(SOLVERS))
+@pytest.mark.parametrize("damping", [0.0, -0.1, float("nan"), float("inf"), "a lot"])
+def test_every_solver_refuses_a_damping_that_is_not_positive_and_finite(name, damping):
+    with pytest.raises(InputError, match="damping: expected a positive finite number"):
+        make_solver(name, damping=damping)
+
+
+class NotANumber(FramePositionTask):
+    """A position task whose Jacobian went wrong: one NaN entry."""
+
+    def compute_jacobian(self, configuration):
+        jacobian = super().compute_jacobian(configuration).copy()
+        jacobian[0, 0] = np.nan
+        return jacobian
+
+
+@pytest.mark.parametrize("name", list(SOLVERS))
+def test_a_task_with_nan_rows_raises_a_solver_error_instead_of_a_nan_step(human, name):
+    levels = [[FramePositionTask(human.model, "Hip", [0.0, 0.9, 0.0])],
+              [NotANumber(human.model, "LWrist", [0.3, 1.0, 0.2])]]
+    configuration = Configuration(human.model)
+    with pytest.raises(SolverError, match="NotANumber gave a non-finite error or Jacobian"):
+        make_solver(name, limits=JointLimits(human.model)).solve(configuration, levels, iterations=3)
+    assert np.isfinite(configuration.q).all()
+
+
+def test_a_failed_svd_is_raised_as_a_solver_error(monkeypatch):
+    from ibik_pin.solvers import nullspace
+
+    def failing_svd(*arguments, **keywords):
+        raise np.linalg.LinAlgError("SVD did not converge")
+
+    monkeypatch.setattr(nullspace.np.linalg, "svd", failing_svd)
+    with pytest.raises(SolverError, match=r"the SVD of a level's projected Jacobian \(3, 6\) failed"):
+        nullspace.damped_solve(np.ones((3, 6)), np.ones(3), DEFAULT_DAMPING)
+
+
+def test_a_proxsuite_failure_skips_its_level_and_is_reported_failed(human, monkeypatch):
+    """A backend failure is recoverable: no foreign exception leaks, the level reads "failed"."""
+    import proxsuite
+
+    class BrokenQP:
+        def __init__(self, *arguments):
+            raise RuntimeError("proxsuite could not allocate")
+
+    monkeypatch.setattr(proxsuite.proxqp.dense, "QP", BrokenQP)
+    levels = human_levels(human, random_human_configuration(human, np.random.default_rng(1)))
+    # Per-step bounds so small that every level needs the QP.
+    solver = HierarchicalQPSolver(limits=JointLimits(human.model, max_step=1e-3, max_root_translation=1e-3))
+    result = solver.solve(Configuration(human.model), levels, iterations=2)
+    # The posture level, after two skipped levels, fits its bounds without a QP.
+    assert [report.status for report in result.levels] == ["failed", "failed", "solved"]
+    assert result.failed_levels == 2
+
+
+def test_the_step_adaptation_halves_on_reversal_grows_while_it_holds_and_resets():
+    criterion = FrameHeight.__new__(FrameHeight)
+    GradientTask.__init__(criterion, max_step_size=0.05, min_step_size=0.01)
+    adaptation = StepAdaptation()
+    east, west = np.array([1.0, 0.0]), np.array([-1.0, 0.0])
+    assert adaptation.step_size(criterion) == 0.05
+    assert adaptation.adapt(criterion, east) == 0.05  # the first step: nothing to compare with
+    assert adaptation.adapt(criterion, west) == 0.025
+    assert adaptation.adapt(criterion, east) == 0.0125
+    assert adaptation.adapt(criterion, west) == 0.01  # floor: min_step_size
+    assert adaptation.adapt(criterion, west) == pytest.approx(0.012)
+    for _ in range(10):
+        adaptation.adapt(criterion, west)
+    assert adaptation.step_size(criterion) == 0.05  # ceiling: max_step_size
+    adaptation.adapt(criterion, east)
+    adaptation.reset()
+    assert adaptation.step_size(criterion) == 0.05
+    assert adaptation.adapt(criterion, west) == 0.05  # a reset forgets the previous direction too
+
+
+def test_a_gradient_task_holds_no_solver_state_and_each_solver_adapts_its_own_step():
+    body = load_arm()
+    configuration = Configuration(body.model, np.array([0.3, 0.4, 0.2, 0.9, 0.1, 0.5]))
+    wrist = FramePositionTask(body.model, body.keypoints["Wrist"])
+    wrist.set_target(configuration.frame_position(body.frame_id("Wrist")).copy())
+    criterion = PullingAgainstTheWrist(wrist)
+    stack, qp = PriorityStackSolver(), HierarchicalQPSolver()
+    before = {key: value for key, value in vars(criterion).items() if key != "evaluations"}
+    stack.solve(configuration, [[wrist], [criterion]], iterations=12)
+    assert {key: value for key, value in vars(criterion).items() if key != "evaluations"} == before
+    assert stack.step_adaptation.step_size(criterion) == pytest.approx(criterion.min_step_size)
+    assert qp.step_adaptation.step_size(criterion) == criterion.max_step_size
+    stack.solve(configuration, [[wrist], [criterion]], iterations=1)  # a new solve starts afresh
+    assert stack.step_adaptation.step_size(criterion) == criterion.max_step_size

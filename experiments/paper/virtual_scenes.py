@@ -73,10 +73,7 @@ def run_planar(
     configuration = Configuration(model, start_q)
     trajectory = [configuration.q.copy()]
     hits = int(segment_hits_object(scene, configuration.q))
-    for level in levels:
-        for task in level:
-            if isinstance(task, ImageTask):
-                task.reset()
+    solver.step_adaptation.reset()
     for _ in range(iterations):
         step = solver.compute_step(configuration, levels)
         q = configuration.integrate(step.dq)

@@ -21,6 +21,7 @@ from ibik_pin.solvers.projection import (
     LiegeoisSolver,
     PriorityStackSolver,
 )
+from ibik_pin.solvers.step_adaptation import StepAdaptation
 
 SOLVERS = {
     "ik": DampedLeastSquaresSolver,
@@ -30,14 +31,25 @@ SOLVERS = {
 }
 
 
-def make_solver(name: str, limits: JointLimits | None = None, damping: float = DEFAULT_DAMPING) -> Solver:
-    """A solver by name: "ik", "liegeois", "stack" or "qp"."""
+def make_solver(name: str, *, limits: JointLimits | None = None, damping: float = DEFAULT_DAMPING) -> Solver:
+    """A solver by name, built as `SOLVERS[name](limits=limits, damping=damping)`.
+
+    Args:
+        name: "ik", "liegeois", "stack" or "qp".
+        limits: joint limits, or None.
+        damping: lambda [m/rad] of every level's damped least squares (see DEFAULT_DAMPING).
+
+    Raises:
+        UnknownNameError: an unknown scheme name (the message lists the available ones).
+        InputError: a damping that is not a positive finite number.
+    """
     if name not in SOLVERS:
         raise UnknownNameError(f"unknown solver {name!r}; available: {', '.join(SOLVERS)}")
     return SOLVERS[name](limits=limits, damping=damping)
 
 
 __all__ = [
-    "Solver", "StepResult", "SolveResult", "LevelReport", "SOLVERS", "make_solver",
+    "Solver", "StepResult", "SolveResult", "LevelReport", "StepAdaptation", "SOLVERS", "make_solver",
+    "DEFAULT_DAMPING",
     "DampedLeastSquaresSolver", "LiegeoisSolver", "PriorityStackSolver", "HierarchicalQPSolver",
 ]

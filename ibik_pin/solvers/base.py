@@ -4,26 +4,35 @@
 either least-squares tasks (`Task`, rows stacked with their weights) or exactly one `GradientTask`
 (the image criterion). Priority is an argument of the solver, never a property of a task: the same
 task objects run through every solver.
+
+Every solver is built the same way, with keyword arguments only:
+``Scheme(limits=None, damping=DEFAULT_DAMPING)`` (the QP adds its backend settings); a solver owns
+the adaptation of its image steps (:class:`~ibik_pin.solvers.step_adaptation.StepAdaptation`).
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Sequence, Set
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import cast
 
 import numpy as np
 
 from ibik_pin.configuration import Configuration
-from ibik_pin.exceptions import InputError
+from ibik_pin.exceptions import InputError, SolverError
 from ibik_pin.limits import JointLimits
+from ibik_pin.solvers.step_adaptation import StepAdaptation
 from ibik_pin.tasks.base import GradientTask, Task
 
 Levels = Sequence[Sequence[Task | GradientTask]]
 
-# Damping lambda of every scheme [units of the task Jacobians, m/rad]: the standing human at its
-# neutral pose is singular (straight knees and elbows) and 1e-3 lets the first steps blow up to
-# tens of radians; 3e-2 converges on whole-body targets in a few steps.
+# Damping lambda of every scheme [units of the task Jacobians, m/rad], one rule for all: a
+# positive finite number, the weight of |dq|^2 being lambda^2 in each level's least squares
+# (the damped pseudo-inverse J^T (J J^T + lambda^2 I)^-1 of the projection schemes, the QP's
+# regulariser). The standing human at its neutral pose is singular (straight knees and elbows) and
+# 1e-3 lets the first steps blow up to tens of radians; 3e-2 converges on whole-body targets in a
+# few steps.
 DEFAULT_DAMPING = 3e-2
 
 
@@ -37,7 +46,7 @@ class LeastSquaresLevel:
 
 @dataclass
 class GradientLevel:
-    """Ascent along a unit direction with a step norm the task adapts to the direction taken.
+    """Ascent along a unit direction with a step norm the solver adapts to the direction taken.
 
     The solver projects `direction` into the null space of the higher levels and calls
     `step_size_along` with the result once per step (later calls, e.g. after clamping a joint,
@@ -47,11 +56,12 @@ class GradientLevel:
     direction: np.ndarray  # (nv,) unit gradient, zeros when it vanishes
     value: float  # the criterion h(q) before the step
     task: GradientTask
+    adaptation: StepAdaptation  # the solver's, which keeps the task's step norm across steps
     step_size: float = 0.0
 
     def step_size_along(self, taken: np.ndarray) -> float:
         if self.step_size == 0.0:
-            self.step_size = self.task.adapt_step(taken)
+            self.step_size = self.adaptation.adapt(self.task, taken)
         return self.step_size
 
 
@@ -100,9 +110,19 @@ class SolveResult:
     failed_levels: int = field(default=0)
 
 
-def build_levels(configuration: Configuration, levels: Levels) -> list:
-    """Evaluate the levels at the configuration: LeastSquaresLevel / GradientLevel / None (empty)."""
-    built = []
+def build_levels(configuration: Configuration, levels: Levels, adaptation: StepAdaptation) -> list:
+    """Evaluate the levels at the configuration: LeastSquaresLevel / GradientLevel / None (empty).
+
+    Args:
+        configuration: the state the step starts from.
+        levels: priority levels, highest first.
+        adaptation: the solver's step adaptation, handed to each gradient level.
+
+    Raises:
+        InputError: a gradient task shares its level with other tasks.
+        SolverError: a least-squares task gives a non-finite error or Jacobian: no step exists.
+    """
+    built: list[LeastSquaresLevel | GradientLevel | None] = []
     for index, level in enumerate(levels):
         tasks = [task for task in level if task.enabled]
         gradient_tasks = [task for task in tasks if isinstance(task, GradientTask)]
@@ -113,9 +133,18 @@ def build_levels(configuration: Configuration, levels: Levels) -> list:
                     "(the image criterion) must be alone in its level"
                 )
             task = gradient_tasks[0]
-            built.append(GradientLevel(task.compute_direction(configuration), task.compute_value(configuration), task))
+            built.append(GradientLevel(task.compute_direction(configuration), task.compute_value(configuration),
+                                       task, adaptation))
         elif tasks:
-            rows = [task.compute_linear_system(configuration) for task in tasks]
+            least_squares = cast(list[Task], tasks)  # no gradient task in this level
+            rows = [task.compute_linear_system(configuration) for task in least_squares]
+            for least_squares_task, (A, b) in zip(least_squares, rows, strict=True):
+                # NaN rows would turn the whole step, then q, into NaN without a word.
+                if not (np.all(np.isfinite(A)) and np.all(np.isfinite(b))):
+                    raise SolverError(
+                        f"{type(least_squares_task).__name__} gave a non-finite error or Jacobian (NaN or infinity); "
+                        "no step can be computed"
+                    )
             built.append(LeastSquaresLevel(np.vstack([A for A, _ in rows]),
                                            np.concatenate([b for _, b in rows])))
         else:
@@ -129,7 +158,7 @@ def least_squares_status(residual: float, b: np.ndarray) -> str:
     return "solved" if residual <= 1e-6 + 0.05 * np.linalg.norm(b) else "relaxed"
 
 
-def report_levels(built: list, dq: np.ndarray, failed: set[int] = frozenset()) -> list[LevelReport]:
+def report_levels(built: list, dq: np.ndarray, failed: Set[int] = frozenset()) -> list[LevelReport]:
     """Reports of every level for the step dq."""
     reports = []
     for index, level in enumerate(built):
@@ -148,15 +177,33 @@ def report_levels(built: list, dq: np.ndarray, failed: set[int] = frozenset()) -
 class Solver(ABC):
     """A scheme that turns levels into a step dq; `solve` iterates it.
 
+    Args:
+        limits: joint limits, or None.
+        damping: lambda [m/rad], a positive finite number (see DEFAULT_DAMPING).
+
     Attributes:
         limits: joint limits, or None. The QP enforces them as constraints at every level; the
             projection schemes lock a coordinate that would leave them and solve again.
+        damping: lambda of every level's damped least squares.
+        step_adaptation: the adapted step norm of each gradient task, reset by `solve`; a loop of
+            `compute_step` calls outside `solve` resets it itself.
+
+    Raises:
+        InputError: a damping that is not a positive finite number.
     """
 
     name = "solver"
 
-    def __init__(self, limits: JointLimits | None = None) -> None:
+    def __init__(self, *, limits: JointLimits | None = None, damping: float = DEFAULT_DAMPING) -> None:
+        try:
+            valid = bool(np.isfinite(damping) and damping > 0.0)
+        except TypeError:
+            valid = False
+        if not valid:
+            raise InputError(f"damping: expected a positive finite number [m/rad], got {damping!r}")
         self.limits = limits
+        self.damping = float(damping)
+        self.step_adaptation = StepAdaptation()
 
     def arrange(self, levels: Levels) -> Levels:
         """The levels this scheme actually solves (IK and Liegeois regroup them)."""
@@ -180,13 +227,14 @@ class Solver(ABC):
             levels: priority levels, highest first.
             iterations: maximum number of steps (the paper uses 15 per frame).
             tolerance: stop early once |dq| < tolerance.
+
+        Raises:
+            InputError: iterations below 1, or a gradient task sharing its level.
+            SolverError: a task gives non-finite rows, so no step can be computed.
         """
         if int(iterations) < 1:
             raise InputError(f"iterations must be >= 1, got {iterations}")
-        for level in levels:
-            for task in level:
-                if isinstance(task, GradientTask):
-                    task.reset()
+        self.step_adaptation.reset()
         step_norms = []
         step = StepResult(np.zeros(configuration.nv), [])
         for _ in range(int(iterations)):

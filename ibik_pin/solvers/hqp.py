@@ -19,11 +19,12 @@ when a level's size changes (a target dropped for a frame). A backend failure sk
 
 from __future__ import annotations
 
+from typing import cast
+
 import numpy as np
 import proxsuite
 
 from ibik_pin.configuration import Configuration
-from ibik_pin.exceptions import InputError
 from ibik_pin.limits import JointLimits
 from ibik_pin.solvers.base import (
     DEFAULT_DAMPING,
@@ -46,8 +47,10 @@ _SOLVED = {
 class HierarchicalQPSolver(Solver):
     """Lexicographic QP stack on proxsuite with joint limits as inequality constraints.
 
+    Built as every solver, with keyword arguments only; `damping` weighs damping^2 |w|^2 on each
+    level's increment, as the stack's damping does.
+
     Attributes:
-        damping: regulariser weight is damping^2 on each level's increment, as the stack's damping.
         accuracy: proxsuite's absolute tolerance eps_abs.
         max_qp_iterations: proxsuite's iteration cap per level.
     """
@@ -56,15 +59,13 @@ class HierarchicalQPSolver(Solver):
 
     def __init__(
         self,
+        *,
         limits: JointLimits | None = None,
         damping: float = DEFAULT_DAMPING,
         accuracy: float = 1e-11,
         max_qp_iterations: int = 1000,
     ) -> None:
-        super().__init__(limits)
-        if not (damping > 0 and np.isfinite(damping)):
-            raise InputError(f"damping must be a positive finite number, got {damping}")
-        self.damping = float(damping)
+        super().__init__(limits=limits, damping=damping)
         self.accuracy = float(accuracy)
         self.max_qp_iterations = int(max_qp_iterations)
         self._qps: dict[int, tuple[tuple[int, int], object]] = {}  # level -> ((n, n_in), QP)
@@ -87,7 +88,7 @@ class HierarchicalQPSolver(Solver):
         return qp, True
 
     def compute_step(self, configuration: Configuration, levels: Levels) -> StepResult:
-        built = build_levels(configuration, self.arrange(levels))
+        built = build_levels(configuration, self.arrange(levels), self.step_adaptation)
         nv = configuration.nv
         if self.limits is not None:
             lower, upper = self.limits.step_bounds(configuration.q)
@@ -110,7 +111,8 @@ class HierarchicalQPSolver(Solver):
             else:
                 if isinstance(level, GradientLevel):
                     hessian = np.eye(size) / level.step_size
-                    linear = -unit_reduced_direction(null_basis, level.direction)
+                    # Not None: the level's unconstrained step above found a direction to climb.
+                    linear = -cast(np.ndarray, unit_reduced_direction(null_basis, level.direction))
                 else:
                     projected = level.A @ null_basis
                     hessian = projected.T @ projected + self.damping**2 * np.eye(size)
@@ -130,10 +132,10 @@ class HierarchicalQPSolver(Solver):
         A warm start from a distant previous answer occasionally stalls; the level is then solved
         once more from a fresh QP object before it counts as failed.
         """
+        arguments = (hessian, linear, None, None, constraint, lower, upper)
         for _ in range(2):
-            qp, is_new = self._qp(index, hessian.shape[0], constraint.shape[0])
-            arguments = (hessian, linear, None, None, constraint, lower, upper)
             try:
+                qp, is_new = self._qp(index, hessian.shape[0], constraint.shape[0])
                 if is_new:
                     qp.init(*arguments)
                 else:
@@ -159,7 +161,7 @@ def _independent_rows(constraint: np.ndarray, candidates: list[int]) -> list[int
     rows = constraint[candidates]
     diagonal = np.abs(np.diag(np.linalg.qr(rows.T, mode="r")))
     scale = np.linalg.norm(rows, axis=1)[: diagonal.size]
-    return [index for index, distance, norm in zip(candidates, diagonal, scale) if distance > 1e-9 * norm]
+    return [index for index, distance, norm in zip(candidates, diagonal, scale, strict=False) if distance > 1e-9 * norm]
 
 
 def _polish(w, multipliers, hessian, linear, constraint, lower, upper, rounds: int = 6) -> np.ndarray:

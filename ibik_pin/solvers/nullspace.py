@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ibik_pin.exceptions import SolverError
 from ibik_pin.solvers.base import GradientLevel
 
 # Singular values below RANK_TOLERANCE * max(1, sigma_max) count as zero for the null space: small
@@ -28,8 +29,14 @@ def damped_solve(
     Returns:
         w: the step in null-space coordinates, shape (r,).
         remaining: orthonormal basis of null(J_k Z_{k-1}) in those coordinates, shape (r, r').
+
+    Raises:
+        SolverError: LAPACK's SVD did not converge.
     """
-    u, sigma, vt = np.linalg.svd(projected, full_matrices=True)
+    try:
+        u, sigma, vt = np.linalg.svd(projected, full_matrices=True)
+    except np.linalg.LinAlgError as error:
+        raise SolverError(f"the SVD of a level's projected Jacobian {projected.shape} failed: {error}") from error
     rank = int(np.sum(sigma > RANK_TOLERANCE * max(1.0, sigma[0] if sigma.size else 0.0)))
     damped = sigma[:rank] / (sigma[:rank] ** 2 + damping**2)
     w = vt[:rank].T @ (damped * (u[:, :rank].T @ residual))

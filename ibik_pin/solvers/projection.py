@@ -19,10 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from ibik_pin.configuration import Configuration
-from ibik_pin.exceptions import InputError
-from ibik_pin.limits import JointLimits
 from ibik_pin.solvers.base import (
-    DEFAULT_DAMPING,
     Levels,
     Solver,
     StepResult,
@@ -30,26 +27,18 @@ from ibik_pin.solvers.base import (
     report_levels,
 )
 from ibik_pin.solvers.nullspace import unconstrained_level_step
-from ibik_pin.tasks.base import GradientTask
+from ibik_pin.tasks.base import GradientTask, Task
 
 
 class PriorityStackSolver(Solver):
-    """Strict priority stack by recursive null-space projection with damped pseudo-inverses.
-
-    Attributes:
-        damping: lambda of the damped pseudo-inverse J^T (J J^T + lambda^2 I)^-1 [same units as J].
+    """Strict priority stack by recursive null-space projection with damped pseudo-inverses
+    J^T (J J^T + damping^2 I)^-1; built as every solver, `PriorityStackSolver(limits=..., damping=...)`.
     """
 
     name = "stack"
 
-    def __init__(self, damping: float = DEFAULT_DAMPING, limits: JointLimits | None = None) -> None:
-        super().__init__(limits)
-        if not (damping >= 0 and np.isfinite(damping)):
-            raise InputError(f"damping must be a finite number >= 0, got {damping}")
-        self.damping = float(damping)
-
     def compute_step(self, configuration: Configuration, levels: Levels) -> StepResult:
-        built = build_levels(configuration, self.arrange(levels))
+        built = build_levels(configuration, self.arrange(levels), self.step_adaptation)
         nv = configuration.nv
         if self.limits is None:
             dq = self._project(built, np.zeros(nv), np.eye(nv))
@@ -85,7 +74,7 @@ class PriorityStackSolver(Solver):
 
 def _merge_least_squares(levels: Levels) -> list[list]:
     """All least-squares tasks above the first gradient level, in one level."""
-    primary = []
+    primary: list[Task | GradientTask] = []
     for level in levels:
         if any(isinstance(task, GradientTask) for task in level):
             break

@@ -3,11 +3,11 @@
 - `Task`: a least-squares task with an error e(q) and its Jacobian J(q). A step asks for
   J dq = -gain * e (first-order convergence of e to zero), weighted by `weight` within its level.
 - `GradientTask`: a scalar criterion h(q) to maximise (the image overlap of eq. 5-6). A step moves
-  along its unit gradient with a norm of at most `step_size`: a normalised secondary step converges
-  where the raw gradient, in pixels per radian, does not. The step size adapts like Rprop on the
-  direction the solver actually takes (the gradient projected into what the higher levels leave
-  free): halved when that direction reverses, grown back while it holds. Why both: docs/method.md,
-  "The image step".
+  along its unit gradient with a norm of at most `max_step_size`: a normalised secondary step
+  converges where the raw gradient, in pixels per radian, does not. The solver adapts the norm
+  between `min_step_size` and `max_step_size` (Rprop on the direction it takes,
+  :mod:`ibik_pin.solvers.step_adaptation`); a task holds no solver state. Why both:
+  docs/method.md, "The image step".
 """
 
 from __future__ import annotations
@@ -65,24 +65,18 @@ class Task(ABC):
 
 
 class GradientTask(ABC):
-    """A scalar criterion h(q) to maximise by steps of norm <= step_size along its gradient.
+    """A scalar criterion h(q) to maximise by steps of bounded norm along its gradient.
 
     Attributes:
-        max_step_size: largest step norm [rad, or the units of v].
-        min_step_size: the adaptive step never shrinks below this.
-        step_size: the current step norm, reset to max_step_size by `reset`.
+        max_step_size: largest step norm [rad, or the units of v]; each solve starts there.
+        min_step_size: the solver's adapted step never shrinks below this.
+        enabled: a disabled criterion (e.g. no usable silhouette) is skipped by every solver.
     """
 
     def __init__(self, max_step_size: float = 0.05, min_step_size: float = 1e-4) -> None:
         self.max_step_size = _check_positive("max_step_size", max_step_size)
         self.min_step_size = _check_positive("min_step_size", min_step_size)
         self.enabled = True
-        self.reset()
-
-    def reset(self) -> None:
-        """Forget the step adaptation (call at the start of each solve)."""
-        self.step_size = self.max_step_size
-        self._previous_direction: np.ndarray | None = None
 
     @abstractmethod
     def compute_value(self, configuration: Configuration) -> float:
@@ -99,21 +93,3 @@ class GradientTask(ABC):
         if norm == 0.0 or not np.isfinite(norm):
             return np.zeros_like(gradient)
         return gradient / norm
-
-    def adapt_step(self, taken: np.ndarray) -> float:
-        """The step size along `taken`, the unit direction the solver will step along this
-        iteration (the gradient projected into the null space of the higher levels).
-
-        Adapting on the projected direction rather than on the raw gradient matters: when most of
-        the gradient pulls against a higher level (a forearm on a dilated silhouette pulling the
-        wrist off its target), the small remainder left in the null space flips from one
-        iteration to the next. Rprop on the raw gradient never sees the flips and keeps taking
-        full steps back and forth; here they halve the step, so noise cannot walk the limb away.
-        """
-        if self._previous_direction is not None:
-            if taken @ self._previous_direction < 0.0:
-                self.step_size = max(0.5 * self.step_size, self.min_step_size)
-            else:
-                self.step_size = min(1.2 * self.step_size, self.max_step_size)
-        self._previous_direction = taken
-        return self.step_size

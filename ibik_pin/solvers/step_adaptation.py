@@ -1,0 +1,82 @@
+"""The image step's norm: Rprop on the direction the solver actually takes, kept by the solver.
+
+A gradient level steps along its unit direction projected into what the higher levels leave free
+(docs/method.md, "The image step"). Its norm starts at the task's `max_step_size` at every solve,
+is halved (never below `min_step_size`) when the direction taken reverses from the previous step's,
+and grows by 1.2 (up to `max_step_size`) while it holds.
+
+This state belongs to the solver that takes the steps, not to the task: a task only says what it
+measures and how far one step may go, so the same task object can run through several solvers,
+each adapting its own step.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ibik_pin.tasks.base import GradientTask
+
+__all__ = ["StepAdaptation"]
+
+# Rprop's factors (Riedmiller & Braun 1993 use 0.5 and 1.2).
+SHRINK = 0.5
+GROW = 1.2
+
+
+@dataclass
+class _TaskStep:
+    """One gradient task's step norm and the unit direction (nv,) of its previous step."""
+
+    step_size: float
+    previous_direction: np.ndarray | None = None
+
+
+class StepAdaptation:
+    """The adapted step norm of every gradient task a solver steps along, forgotten by `reset`."""
+
+    def __init__(self) -> None:
+        # Keyed by id(task), with the task kept alive so that its id cannot be reused meanwhile.
+        self._steps: dict[int, tuple[GradientTask, _TaskStep]] = {}
+
+    def reset(self) -> None:
+        """Forget every task's adaptation: the next step of each starts at its max_step_size."""
+        self._steps.clear()
+
+    def _entry(self, task: GradientTask) -> _TaskStep:
+        entry = self._steps.get(id(task))
+        if entry is None:
+            entry = (task, _TaskStep(task.max_step_size))
+            self._steps[id(task)] = entry
+        return entry[1]
+
+    def step_size(self, task: GradientTask) -> float:
+        """The task's current step norm [rad, or the units of v]: max_step_size before its first step."""
+        return self._entry(task).step_size
+
+    def adapt(self, task: GradientTask, taken: np.ndarray) -> float:
+        """The step norm along `taken` for this iteration, adapted to the previous iteration's.
+
+        Args:
+            task: the gradient task of the level.
+            taken: (nv,) the unit direction the solver steps along this iteration: the task's
+                gradient projected into the null space of the higher levels.
+
+        Returns:
+            The step norm [rad, or the units of v].
+
+        Adapting on the projected direction rather than on the raw gradient matters: when most of
+        the gradient pulls against a higher level (a forearm on a dilated silhouette pulling the
+        wrist off its target), the small remainder left in the null space flips from one
+        iteration to the next. Rprop on the raw gradient never sees the flips and keeps taking
+        full steps back and forth; here they halve the step, so noise cannot walk the limb away.
+        """
+        step = self._entry(task)
+        if step.previous_direction is not None:
+            if taken @ step.previous_direction < 0.0:
+                step.step_size = max(SHRINK * step.step_size, task.min_step_size)
+            else:
+                step.step_size = min(GROW * step.step_size, task.max_step_size)
+        step.previous_direction = taken
+        return step.step_size
