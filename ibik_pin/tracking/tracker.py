@@ -20,7 +20,7 @@ from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
 from ibik_pin.limits import JointLimits
 from ibik_pin.model import BodyModel
-from ibik_pin.solvers import make_solver
+from ibik_pin.solvers import LevelReport, SolveResult, make_solver
 from ibik_pin.tasks import FramePositionTask, ImageTask, PostureTask, View
 from ibik_pin.tasks.base import GradientTask
 from ibik_pin.tasks.silhouette_axis import AxisView, SilhouetteAxisTask
@@ -102,6 +102,12 @@ class TrackingResult:
         dropped_targets: per frame, the targets absent (NaN) in that frame.
         disabled_views: per frame, the cameras whose silhouette was empty.
         solve_seconds: wall time of the solves alone [s].
+        level_names: the L priority levels of each frame's solve, highest first: "lower-body
+            targets", "upper-body targets", "image" (when the image is used), "posture".
+        level_reports: per frame, per level (L), the solver's report of the frame solve's last
+            step: status ("solved", "relaxed", "failed", "empty") and residual (NaN for the image
+            level, which reports its criterion instead). With `swivel_search`, the frame's main
+            solve, before the swivel pass.
     """
 
     q: np.ndarray
@@ -115,6 +121,8 @@ class TrackingResult:
     solve_seconds: float = 0.0
     target_names: list[str] = field(default_factory=list)
     target_distances: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    level_names: list[str] = field(default_factory=list)
+    level_reports: list[list[LevelReport]] = field(default_factory=list)
 
     @property
     def frames_per_second(self) -> float:
@@ -186,15 +194,15 @@ def solve_first_frame(
     solver,
     configuration: Configuration,
     levels: list[list],
-    image_task: ImageTask | None,
+    image_task: GradientTask | None,
     iterations: int,
     starts: int = 1,
     spread: float = 0.5,
     seed: int = 0,
-) -> None:
+) -> SolveResult:
     """The first frame, from configuration.q: blind IK, then every level; with `starts` > 1 also
     from random joint angles (a fraction `spread` of each range around the middle, root kept),
-    keeping the solution whose image criterion is highest.
+    keeping the solution whose image criterion is highest. Returns the kept solution's last solve.
 
     Later frames warm-start from this one and follow the criterion's local maximum, so a wrong
     basin on the first frame (an elbow 20 cm off with its forearm still on the silhouette) lasts;
@@ -204,7 +212,7 @@ def solve_first_frame(
     limits = solver.limits
     rng = np.random.default_rng(seed)
     initial = configuration.q.copy()
-    best_q, best_value = None, -np.inf
+    solutions: list[tuple[float, np.ndarray, SolveResult]] = []  # criterion, q, last solve
     for start in range(max(int(starts), 1) if image_task is not None else 1):
         q = initial.copy()
         if start > 0 and limits is not None:
@@ -212,14 +220,15 @@ def solve_first_frame(
             half = 0.5 * spread * (limits.upper - limits.lower)
             q[limits.q_index] = middle + rng.uniform(-1.0, 1.0, middle.size) * half
         configuration.update(q)
-        solver.solve(configuration, blind, iterations=iterations)
+        blind_result = solver.solve(configuration, blind, iterations=iterations)
         if image_task is None:
-            return
-        solver.solve(configuration, levels, iterations=iterations)
-        value = image_task.compute_value(configuration)
-        if value > best_value:
-            best_q, best_value = configuration.q.copy(), value
+            return blind_result
+        solved = solver.solve(configuration, levels, iterations=iterations)
+        solutions.append((image_task.compute_value(configuration), configuration.q.copy(), solved))
+    # The first of the highest criteria, as max() keeps the earliest of equal keys.
+    _, best_q, best_result = max(solutions, key=lambda solution: solution[0])
     configuration.update(best_q)
+    return best_result
 
 
 class Tracker:
@@ -281,6 +290,11 @@ class Tracker:
         levels.append([self.posture])
         return levels
 
+    def _level_names(self) -> list[str]:
+        """What each level of `_levels` holds, in the same order."""
+        image = ["image"] if self.settings.use_image and self.cameras else []
+        return ["lower-body targets", "upper-body targets", *image, "posture"]
+
     def track(
         self,
         names: list[str],
@@ -322,6 +336,7 @@ class Tracker:
             target_names=list(names),
             target_distances=np.full((frame_count, len(names)), np.nan),
             overlap=np.full((frame_count, len(self.cameras)), np.nan),
+            level_names=self._level_names(),
         )
         configuration = Configuration(self.body.model, initial_configuration(self.body, names, targets[0]))
         caps = support_caps(self.cameras, configuration.q[:3]) if use_image else []
@@ -343,11 +358,12 @@ class Tracker:
             result.disabled_views.append(disabled)
             started = time.perf_counter()
             if frame == 0:
-                solve_first_frame(self.solver, configuration, levels,
-                                  self.image_criterion if use_image else None,
-                                  self.settings.first_frame_iterations, self.settings.first_frame_starts)
+                solved = solve_first_frame(self.solver, configuration, levels,
+                                           self.image_criterion if use_image else None,
+                                           self.settings.first_frame_iterations, self.settings.first_frame_starts)
             else:
-                self.solver.solve(configuration, levels, iterations=self.settings.iterations)
+                solved = self.solver.solve(configuration, levels, iterations=self.settings.iterations)
+            result.level_reports.append(solved.levels)
             if use_image and self.settings.swivel_search:
                 self._follow_swivel_hints(configuration, names, present, levels)
             result.solve_seconds += time.perf_counter() - started

@@ -1,0 +1,103 @@
+"""Tests of the Tracker: a short synthetic sequence of the human model, blind and with the image."""
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from ibik_pin.configuration import Configuration
+from ibik_pin.exceptions import InputError
+from ibik_pin.synthetic.silhouettes import render_silhouettes
+from ibik_pin.tracking.tracker import Tracker, TrackingSettings
+from ibik_pin.vision.camera import look_at_camera
+from tests.conftest import random_human_configuration
+
+TARGETS = ["Hip", "LHip", "RHip", "LKnee", "RKnee", "LAnkle", "RAnkle", "Neck", "Head",
+           "LShoulder", "RShoulder", "LWrist", "RWrist"]
+FRAMES = 4
+
+
+@pytest.fixture(scope="module")
+def sequence(human):
+    """FRAMES configurations moving smoothly between two seeded poses, and their keypoints (F, K, 3) [m]."""
+    rng = np.random.default_rng(31)
+    start = random_human_configuration(human, rng, spread=0.3)
+    end = random_human_configuration(human, rng, spread=0.3)
+    end[:7] = start[:7]  # the same root: the motion is the limbs'
+    motion = np.array([pin.interpolate(human.model, start, end, t) for t in np.linspace(0.0, 0.15, FRAMES)])
+    frame_ids = human.frame_ids(TARGETS)
+    targets = np.array([Configuration(human.model, q).frame_positions(frame_ids) for q in motion])
+    return motion, targets
+
+
+def fast_settings(**overrides) -> TrackingSettings:
+    return TrackingSettings(**{"iterations": 10, "first_frame_iterations": 40, **overrides})
+
+
+def test_blind_tracking_reaches_every_target_of_every_frame(human, sequence):
+    _, targets = sequence
+    result = Tracker(human, settings=fast_settings()).track(TARGETS, targets)
+    assert result.q.shape == (FRAMES, human.model.nq)
+    assert result.target_distances.shape == (FRAMES, len(TARGETS))
+    assert np.nanmax(result.target_distances) < 1e-4
+    assert np.all(np.isnan(result.overlap))  # no camera, no overlap
+    assert result.dropped_targets == [[]] * FRAMES
+
+
+def test_every_frame_keeps_the_solvers_report_of_each_level(human, sequence):
+    _, targets = sequence
+    result = Tracker(human, settings=fast_settings()).track(TARGETS, targets)
+    assert result.level_names == ["lower-body targets", "upper-body targets", "posture"]
+    assert len(result.level_reports) == FRAMES
+    for reports in result.level_reports:
+        assert [report.kind for report in reports] == ["tasks", "tasks", "tasks"]
+        assert [report.status for report in reports[:2]] == ["solved", "solved"]
+        assert all(np.isfinite(report.residual) for report in reports)
+
+
+def test_a_target_absent_in_one_frame_is_reported_dropped(human, sequence):
+    _, targets = sequence
+    targets = targets.copy()
+    wrist = TARGETS.index("LWrist")
+    targets[2, wrist] = np.nan
+    result = Tracker(human, settings=fast_settings()).track(TARGETS, targets)
+    assert result.dropped_targets[2] == ["LWrist"]
+    assert np.isnan(result.target_distances[2, wrist])
+    assert np.isfinite(np.delete(result.target_distances[2], wrist)).all()
+
+
+def test_tracking_with_the_image_reports_the_image_level_and_the_overlap(human, sequence):
+    motion, targets = sequence
+    center = Configuration(human.model, motion[0]).frame_position(human.frame_id("Hip"))
+    cameras = [look_at_camera(name, (160, 120), 150.0, center + offset, center, np.array([0.0, 1.0, 0.0]))
+               for name, offset in [("front", [3.5, 0.3, 0.5]), ("side", [0.4, 0.5, -3.8])]]
+    masks = [render_silhouettes(human, q, cameras) for q in motion]
+    tracker = Tracker(human, cameras, fast_settings(iterations=5, first_frame_iterations=20))
+    result = tracker.track(TARGETS, targets, silhouettes=lambda frame: masks[frame])
+    assert result.level_names == ["lower-body targets", "upper-body targets", "image", "posture"]
+    for reports in result.level_reports:
+        image = reports[2]
+        assert (image.kind, image.status) == ("gradient", "solved")
+        assert np.isnan(image.residual) and np.isfinite(image.value)
+    assert result.overlap.shape == (FRAMES, 2)
+    assert result.overlap.min() > 0.5  # the skeleton lies inside both silhouettes
+    assert np.nanmax(result.target_distances) < 2e-3
+
+
+def test_an_unknown_keypoint_is_refused_with_the_known_ones(human, sequence):
+    _, targets = sequence
+    with pytest.raises(InputError, match=r"unknown keypoint name\(s\) Tail; known keypoints: .*LWrist"):
+        Tracker(human, settings=fast_settings()).track([*TARGETS[:-1], "Tail"], targets)
+
+
+def test_targets_of_the_wrong_shape_are_refused(human, sequence):
+    _, targets = sequence
+    with pytest.raises(InputError, match=r"targets must have shape \(F, 13, 3\), got \(4, 12, 3\)"):
+        Tracker(human, settings=fast_settings()).track(TARGETS, targets[:, 1:])
+
+
+def test_cameras_without_silhouettes_are_refused(human, sequence):
+    _, targets = sequence
+    camera = look_at_camera("front", (160, 120), 150.0, np.array([3.0, 1.0, 0.0]), np.zeros(3),
+                            np.array([0.0, 1.0, 0.0]))
+    with pytest.raises(InputError, match="the image criterion needs silhouettes"):
+        Tracker(human, [camera], fast_settings()).track(TARGETS, targets)
