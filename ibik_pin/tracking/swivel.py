@@ -77,7 +77,7 @@ class SwivelSearch:
     body: BodyModel
     terms: Sequence[tuple[object, float]]
     samples: int = 36
-    min_gain: float = 0.1
+    min_gain: float = 0.02
     min_distance: float = 0.02
 
     def __post_init__(self) -> None:

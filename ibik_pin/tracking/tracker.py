@@ -273,10 +273,11 @@ class Tracker:
                 self._hint_tasks[name] = FramePositionTask(self.body.model, self.body.keypoints[name])
             self._hint_tasks[name].set_target(position)
             hint_tasks.append(self._hint_tasks[name])
-        # The hints rank below every end effector, so a hint that cannot be met bends nothing else.
-        hinted = [level for level in levels if self.image_criterion not in level and self.posture not in level]
-        self.solver.solve(configuration, [*hinted, hint_tasks, [self.posture]], iterations=self.settings.iterations)
-        self.solver.solve(configuration, levels, iterations=self.settings.iterations)
+        # The hints rank below every end effector, so a hint that cannot be met bends nothing else,
+        # and above the image level, whose local climb would otherwise take the joint back.
+        targets = [level for level in levels if self.image_criterion not in level and self.posture not in level]
+        self.solver.solve(configuration, [*targets, hint_tasks, [self.image_criterion], [self.posture]],
+                          iterations=self.settings.iterations)
 
     def _levels(self, names: list[str]) -> list[list]:
         for name in names:
