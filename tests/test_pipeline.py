@@ -184,6 +184,9 @@ def test_the_report_holds_every_target_s_residual_per_frame(runs, recording):
     assert report["frame_rate_hz"] == 30.0
     assert np.allclose(report["times_s"], np.arange(FRAMES) / 30.0, atol=1e-9)
     assert "Frame#" in report["frame_numbering"]
+    levels = report["solver_levels"]
+    assert levels["levels"] == ["lower-body targets", "upper-body targets", "image", "posture"]
+    assert all(len(statuses) == FRAMES for statuses in levels["status_per_frame"].values())
 
 
 def test_an_absent_target_is_null_in_the_report(recording, tmp_path):

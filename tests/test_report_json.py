@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 
+from ibik_pin.solvers import LevelReport
 from ibik_pin.tracking.axes import AxesChoice, AxesScore
 from ibik_pin.tracking.report import ResidualStats, TrackingReport
 from ibik_pin.tracking.tracker import TrackingResult, TrackingSettings
@@ -31,6 +32,9 @@ def tracking_result() -> TrackingResult:
         solve_seconds=0.5,
         target_names=["Hip", "RWrist"],
         target_distances=distances,
+        level_names=["lower-body targets", "posture"],
+        level_reports=[[LevelReport("tasks", 0.0, np.nan, first), LevelReport("tasks", 0.1, np.nan, "relaxed")]
+                       for first in ("solved", "relaxed", "solved")],
     )
 
 
@@ -67,6 +71,14 @@ def test_frames_are_keyed_by_the_trc_s_frame_numbers(report):
     assert parsed["trc_axes"]["sampled_frames"] == [1, 3]
     assert parsed["trc_axes"]["inside_images"] == {"y-up": 0.44, "z-up": 1.0}
     assert parsed["trc_axes"]["inside_silhouettes"] == {}
+
+
+def test_the_solver_s_status_is_reported_per_level_and_frame(report):
+    parsed = json.loads(report.to_json())["solver_levels"]
+    assert parsed["levels"] == ["lower-body targets", "posture"]
+    assert parsed["status_per_frame"]["lower-body targets"] == ["solved", "relaxed", "solved"]
+    assert parsed["frames_per_status"] == {"lower-body targets": {"relaxed": 1, "solved": 2},
+                                           "posture": {"relaxed": 3}}
 
 
 def test_the_report_reads_like_its_json(report):

@@ -112,6 +112,34 @@ class TrcAxesReport:
 
 
 @dataclass
+class SolverLevelsReport:
+    """The solver's verdict on each priority level, frame by frame (solvers.base.LevelReport).
+
+    Attributes:
+        levels: the priority levels, highest first.
+        status_per_frame: per level, the status of each frame's last solver step: "solved";
+            "relaxed" (a least-squares optimum with a residual: unreachable under the higher
+            levels or the joint limits); "failed" (the QP backend failed, the level was skipped);
+            "empty" (nothing to do: no enabled task, no null space left or a zero gradient).
+        frames_per_status: per level, how many frames ended in each status.
+    """
+
+    levels: list[str] = field(default_factory=list)
+    status_per_frame: dict[str, list[str]] = field(default_factory=dict)
+    frames_per_status: dict[str, dict[str, int]] = field(default_factory=dict)
+
+    @classmethod
+    def from_result(cls, result: TrackingResult) -> SolverLevelsReport:
+        if not result.level_reports:
+            return cls()
+        # A level name may repeat in principle; the index keeps each one's column apart.
+        status = {name: [frame[index].status for frame in result.level_reports]
+                  for index, name in enumerate(result.level_names)}
+        counts = {name: {kind: values.count(kind) for kind in sorted(set(values))} for name, values in status.items()}
+        return cls(list(result.level_names), status, counts)
+
+
+@dataclass
 class TrackingReport:
     """Everything report.json holds; the field names are its keys (see the module docstring).
 
@@ -137,6 +165,7 @@ class TrackingReport:
         joint_limit_hits: TRC frame number -> joints at a limit (frames without any omitted).
         frames_with_dropped_targets: TRC frame number -> targets absent in that frame.
         frames_with_disabled_views: TRC frame number -> cameras whose silhouette was empty.
+        solver_levels: per priority level, the solver's status at each frame.
     """
 
     frames: int
@@ -158,6 +187,7 @@ class TrackingReport:
     joint_limit_hits: dict[str, list[str]]
     frames_with_dropped_targets: dict[str, list[str]]
     frames_with_disabled_views: dict[str, list[str]]
+    solver_levels: SolverLevelsReport = field(default_factory=SolverLevelsReport)
 
     @classmethod
     def from_tracking(
@@ -208,6 +238,7 @@ class TrackingReport:
             joint_limit_hits=by_frame(result.limit_hits),
             frames_with_dropped_targets=by_frame(result.dropped_targets),
             frames_with_disabled_views=by_frame(result.disabled_views),
+            solver_levels=SolverLevelsReport.from_result(result),
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -266,4 +297,4 @@ def _json_ready(value: Any) -> Any:
     return value
 
 
-__all__ = ["FRAME_NUMBERING", "ResidualStats", "TrackingReport", "TrcAxesReport"]
+__all__ = ["FRAME_NUMBERING", "ResidualStats", "SolverLevelsReport", "TrackingReport", "TrcAxesReport"]
