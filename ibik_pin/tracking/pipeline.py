@@ -259,7 +259,7 @@ def run_track(job: TrackJob) -> TrackingReport:
     settings = job.settings
     tracker = Tracker(body, cameras if use_image else [], settings)
     with tqdm(total=frame_count, desc="tracking", unit="frame", disable=True if job.quiet else None) as bar:
-        result = tracker.track(names, targets_m, silhouettes.frame if use_image else None,
+        result = tracker.track(names, targets_m, silhouettes.frame if use_image and silhouettes is not None else None,
                                progress=bar.update)
 
     job.out.parent.mkdir(parents=True, exist_ok=True)
