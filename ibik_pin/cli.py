@@ -51,6 +51,13 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mask-filter", type=int, default=0, metavar="R",
                         help="vote each silhouette pixel over the 2R+1 frames around it, to remove "
                              "segmentation flicker (default 0: off)")
+    # The tracker's CRITERIA, written here so that `ibik --help` need not import the tracker.
+    parser.add_argument("--criterion", choices=("paper", "two-way"), default="paper",
+                        help="image criterion: paper, the overlap of eq. (5)-(6) (default), or two-way, "
+                             "that overlap plus the silhouette's medial axis explained by the skeleton")
+    parser.add_argument("--swivel-search", action="store_true",
+                        help="after each frame, search every free elbow's and knee's swivel on the image "
+                             "criterion (experimental: see the README's real-data results)")
     parser.add_argument("--trc-axes", choices=("auto", "y-up", "z-up"), default="auto",
                         help="axis convention of the TRC files: y-up as Pose2Sim and OpenSim write "
                              "them, z-up in the calibration's own world (as many mocap systems "
@@ -83,7 +90,8 @@ def _job(arguments: argparse.Namespace) -> TrackJob:
         cameras=[name.strip() for name in arguments.cameras.split(",")] if arguments.cameras else None,
         model=arguments.model,
         settings=TrackingSettings(method=arguments.method, iterations=arguments.iterations,
-                                  use_image=not arguments.no_image, mask_filter_radius=arguments.mask_filter),
+                                  use_image=not arguments.no_image, mask_filter_radius=arguments.mask_filter,
+                                  criterion=arguments.criterion, swivel_search=arguments.swivel_search),
         overlay=arguments.overlay,
         quiet=arguments.quiet,
         trc_axes=arguments.trc_axes,

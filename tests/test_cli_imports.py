@@ -63,3 +63,12 @@ def test_the_ibik_command_runs_openblas_on_one_thread_unless_the_user_says_other
 
     assert run_python(as_command + probe) == "1"
     assert run_python(as_command + "import os\nos.environ['OPENBLAS_NUM_THREADS'] = '3'\n" + probe) == "3"
+
+
+def test_the_criterion_choices_of_the_cli_are_the_trackers():
+    from ibik_pin.cli import build_parser
+    from ibik_pin.tracking.tracker import CRITERIA
+
+    track = build_parser()._subparsers._group_actions[0].choices["track"]
+    criterion = next(action for action in track._actions if action.dest == "criterion")
+    assert tuple(criterion.choices) == CRITERIA
