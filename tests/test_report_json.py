@@ -102,3 +102,16 @@ def test_the_summary_lists_the_targets_worst_first_in_millimetres(report):
 def test_write_leaves_a_file_json_loads(report, tmp_path):
     report.write(tmp_path / "report.json")
     assert json.loads((tmp_path / "report.json").read_text(), parse_constant=refuse_constant)["frames"] == 3
+
+
+def test_levels_merged_by_the_scheme_are_reported_by_number():
+    from types import SimpleNamespace
+
+    from ibik_pin.tracking.report import SolverLevelsReport
+
+    solved = SimpleNamespace(status="solved")
+    result = SimpleNamespace(level_names=["lower body", "upper body", "image", "posture"],
+                             level_reports=[[solved], [solved]])  # ik: every target in one level
+    report = SolverLevelsReport.from_result(result)
+    assert report.levels == ["level 1"]
+    assert report.status_per_frame == {"level 1": ["solved", "solved"]}

@@ -132,11 +132,16 @@ class SolverLevelsReport:
     def from_result(cls, result: TrackingResult) -> SolverLevelsReport:
         if not result.level_reports:
             return cls()
+        names = list(result.level_names)
+        count = max(len(frame) for frame in result.level_reports)
+        if any(len(frame) != len(names) for frame in result.level_reports):
+            # The ik and liegeois schemes merge the target levels into one: name what they solved.
+            names = [f"level {index + 1}" for index in range(count)]
         # A level name may repeat in principle; the index keeps each one's column apart.
-        status = {name: [frame[index].status for frame in result.level_reports]
-                  for index, name in enumerate(result.level_names)}
+        status = {name: [frame[index].status if index < len(frame) else "empty" for frame in result.level_reports]
+                  for index, name in enumerate(names)}
         counts = {name: {kind: values.count(kind) for kind in sorted(set(values))} for name, values in status.items()}
-        return cls(list(result.level_names), status, counts)
+        return cls(names, status, counts)
 
 
 @dataclass
