@@ -32,6 +32,9 @@ The last two are not body segments but where a data set puts its keypoints: Pose
 file's Hip may be at the hip joints' level (pelvis_height 0) while the model's Hip is its root,
 0.10 m higher; a Neck may be at the shoulders' level while the model's is 0.15 m above them. Setting
 them lets the model's keypoints coincide with the data's, which a fit cannot do otherwise.
+
+This module is long because its one concept, the table of lengths and the model edits that set each, is
+one table read by one fitting loop; split, each half would need the other.
 """
 
 from __future__ import annotations

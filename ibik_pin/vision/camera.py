@@ -9,6 +9,9 @@ Conventions (OpenCV's):
 Two camera kinds share the same interface (``project``, ``project_with_jacobian``,
 ``pixel_radius``): :class:`PinholeCamera`, the calibrated OpenCV model with distortion, and
 :class:`OrthographicCamera`, for planar virtual experiments.
+
+This module is long because the pinhole model's distortion and its analytic Jacobian are one derivation
+that reads best in one place, beside the orthographic camera that shares its interface.
 """
 
 from __future__ import annotations
