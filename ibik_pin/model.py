@@ -31,9 +31,6 @@ class BodyModel:
         segments: pairs of keypoint names; each is a rigid segment between two keypoints.
         segment_radii: radius [m] of each segment's capsule, same order as `segments`.
         end_effectors: keypoints that are usually known targets (the rest are estimated).
-        urdf_path: the URDF the model was loaded from (its meshes and inertias), if any.
-        calibrated: the segments and keypoint placements are a subject's (fitted to a static
-            trial, or read from a URDF with keypoint links): tracking must not scale it again.
     """
 
     model: pin.Model
@@ -41,8 +38,6 @@ class BodyModel:
     segments: list[tuple[str, str]]
     segment_radii: np.ndarray
     end_effectors: list[str] = field(default_factory=list)
-    urdf_path: Path | None = None
-    calibrated: bool = False
 
     def frame_id(self, keypoint: str) -> int:
         """Model frame index of a keypoint; UnknownNameError lists the known keypoints."""
