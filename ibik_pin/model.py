@@ -19,6 +19,8 @@ import pinocchio as pin
 from ibik_pin.exceptions import FileFormatError, InputError, UnknownNameError
 
 HUMAN_URDF_RELATIVE = Path("example-robot-data/robots/human_description/robots/human.urdf")
+#: Links of this prefix in a URDF are keypoints (``keypoint_Neck`` is the Neck), see load_human.
+KEYPOINT_LINK_PREFIX = "keypoint_"
 
 
 @dataclass
@@ -31,6 +33,9 @@ class BodyModel:
         segments: pairs of keypoint names; each is a rigid segment between two keypoints.
         segment_radii: radius [m] of each segment's capsule, same order as `segments`.
         end_effectors: keypoints that are usually known targets (the rest are estimated).
+        urdf_path: the URDF the model was loaded from (its meshes and inertias), if any.
+        calibrated: the segments and keypoint placements are a subject's (fitted to a static
+            trial, or read from a URDF with keypoint links): tracking must not scale it again.
     """
 
     model: pin.Model
@@ -38,6 +43,8 @@ class BodyModel:
     segments: list[tuple[str, str]]
     segment_radii: np.ndarray
     end_effectors: list[str] = field(default_factory=list)
+    urdf_path: Path | None = None
+    calibrated: bool = False
 
     def frame_id(self, keypoint: str) -> int:
         """Model frame index of a keypoint; UnknownNameError lists the known keypoints."""
@@ -166,23 +173,48 @@ HUMAN_END_EFFECTORS = ["Hip", "LAnkle", "RAnkle", "LWrist", "RWrist", "Head"]
 def load_human(urdf_path: str | Path | None = None, free_flyer: bool = True) -> BodyModel:
     """The whole-body human: example-robot-data's 36-DOF ISB model with Pose2Sim keypoints.
 
+    A URDF with keypoint links (links named ``keypoint_<Name>``, as
+    :func:`ibik_pin.subject.urdf.write_subject_urdf` writes a calibrated subject) gives its
+    keypoints there instead of at the default placements, keypoints of other names included, and
+    the body is marked ``calibrated``; its segment radii are the default ones scaled by its
+    stature.
+
     Args:
         urdf_path: another URDF with the same joint names; default the installed human.urdf.
         free_flyer: add the 6-DOF floating base (43 coordinates, 42 velocities).
     """
-    model = load_urdf(urdf_path or human_urdf_path(), free_flyer=free_flyer)
+    path = Path(urdf_path) if urdf_path is not None else human_urdf_path()
+    model = load_urdf(path, free_flyer=free_flyer)
     model.name = "human"
+    # name -> (link frame index, parent joint, placement), copied: addFrame reallocates the frames
+    calibrated = {frame.name[len(KEYPOINT_LINK_PREFIX):]: (index, int(frame.parentJoint), frame.placement.copy())
+                  for index, frame in enumerate(model.frames)
+                  if frame.type == pin.FrameType.BODY and frame.name.startswith(KEYPOINT_LINK_PREFIX)}
     for name, (joint, offset) in _HUMAN_KEYPOINTS.items():
+        if name in calibrated:
+            continue
         if joint == "root_joint" and not free_flyer:
             joint = "universe"
         add_keypoint_frame(model, name, joint, np.array(offset))
-    return BodyModel(
+    for name, (link, joint_index, placement) in calibrated.items():
+        if not name or model.existFrame(name):
+            raise FileFormatError(f"URDF file {str(path)!r}: keypoint link {KEYPOINT_LINK_PREFIX + name!r} names "
+                                  "no keypoint or one that is already a frame of the model")
+        model.addFrame(pin.Frame(name, joint_index, link, placement, pin.FrameType.OP_FRAME))
+    body = BodyModel(
         model=model,
-        keypoints={name: name for name in _HUMAN_KEYPOINTS},
+        keypoints={name: name for name in [*_HUMAN_KEYPOINTS, *(n for n in calibrated if n not in _HUMAN_KEYPOINTS)]},
         segments=[segment for segment, _ in _HUMAN_SEGMENTS],
         segment_radii=np.array([radius for _, radius in _HUMAN_SEGMENTS]),
         end_effectors=list(HUMAN_END_EFFECTORS),
+        urdf_path=path,
+        calibrated=bool(calibrated),
     )
+    if calibrated:
+        from ibik_pin.subject.scaling import HUMAN_NEUTRAL_STATURE_M, neutral_stature  # scaling imports model
+
+        body.segment_radii = body.segment_radii * (neutral_stature(body) / HUMAN_NEUTRAL_STATURE_M)
+    return body
 
 
 def _project_model(file_name: str) -> Path:

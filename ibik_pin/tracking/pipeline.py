@@ -198,16 +198,27 @@ def _fit_to_size(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
 
 
 def prepare_body(job: TrackJob, names: list[str], targets_m: np.ndarray) -> BodyModel:
-    """The human (or --model), scaled from the static trial or from the targets' stature."""
+    """The human (or --model) fitted to the subject.
+
+    With --static: calibrated on the static trial (segment scales and keypoint placements,
+    subject.calibration). Without, a --model that is already a calibrated subject (a URDF with
+    keypoint links, as `ibik calibrate` writes) is used as it is: scaling it again would move its
+    joints away from the keypoint placements fitted with them. Otherwise the segments are scaled
+    from the targets' own distances, or the stature.
+    """
+    from ibik_pin.subject.calibration import calibrate_subject, check_subject_size
+
     body = load_human(job.model) if job.model is not None else load_human()
     _check_names(job.targets, names, body)
     if job.static is not None:
         static, static_m = _trc_in_metres(job.static)
         _check_names(job.static, static.marker_names, body)
-        lengths = segment_lengths_from_keypoints(static.marker_names, static_m)
-        return scale_human(body, lengths)
+        return calibrate_subject(body, static.marker_names, static_m, source=f"--static {job.static}").body
+    if body.calibrated:
+        return body
     lengths = segment_lengths_from_keypoints(names, targets_m)
     if lengths:
+        check_subject_size(body, lengths, f"--targets {job.targets}")
         return scale_human(body, lengths)
     stature = _stature(names, targets_m)
     return scale_from_stature(body, stature) if np.isfinite(stature) else body
