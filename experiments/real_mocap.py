@@ -27,6 +27,7 @@ import dataclasses
 import json
 import platform
 import shutil
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -65,6 +66,18 @@ def _clip_names(text: str) -> list[str]:
             raise SystemExit(f"real_mocap: error: --clips: unknown clip {item!r}; known: {', '.join(CLIPS)}, "
                              "walking, boxing, all")
     return list(dict.fromkeys(names))
+
+
+def _revision() -> str:
+    """The repository's commit, with "+ local changes" when the library's files differ from it."""
+    try:
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPOSITORY, capture_output=True,
+                                text=True, check=True).stdout.strip()
+        changed = subprocess.run(["git", "status", "--porcelain", "--", "ibik_pin"], cwd=REPOSITORY,
+                                 capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return commit + (" + local changes to ibik_pin" if changed else "")
 
 
 def main() -> None:
@@ -112,6 +125,7 @@ def main() -> None:
         if not arguments.quiet:
             print(text, flush=True)
 
+    revision = _revision()  # the code this process loads now
     started = time.perf_counter()
     results = []
     total = len(clips) * len(conditions) * len(variants)
@@ -141,10 +155,10 @@ def main() -> None:
     header = (f"# Real motion capture benchmark (`{command}`)\n\n"
               f"{len(clips)} clips ({', '.join(clips)}), {arguments.frames} frames each at {RATE_HZ:g} Hz; "
               f"settings overridden: {overrides or 'none'}; total wall time {wall:.0f} s on {platform.node()} "
-              f"({len(results)} runs of `ibik track`).")
+              f"({len(results)} runs of `ibik track`); code at {revision}.")
     (out / "real_mocap.md").write_text(markdown(results, summary, header))
     (out / "real_mocap.json").write_text(json.dumps({
-        "command": command, "clips": {name: dataclasses.asdict(CLIPS[name]) for name in clips},
+        "command": command, "revision": revision, "clips": {name: dataclasses.asdict(CLIPS[name]) for name in clips},
         "frames": arguments.frames, "rate_hz": RATE_HZ, "overrides": overrides, "settings": settings,
         "wall_seconds": wall, "summary": summary, "runs": [r.row() for r in results],
     }, indent=2) + "\n")

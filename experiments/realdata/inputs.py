@@ -41,7 +41,7 @@ from realdata.clips import RATE_HZ, STATIC_SPACING_S, ClipSpec, MocapClip, load_
 CONDITIONS = ("clean", "defects")
 RIG_VIEWS = 4
 RIG_SEED = 0
-INPUTS_VERSION = 1  # bump when what is written changes, so that caches are rebuilt
+INPUTS_VERSION = 2  # bump when what is written changes, so that caches are rebuilt
 
 
 @dataclass
@@ -106,6 +106,18 @@ def _ordered_rig(clip: MocapClip) -> list:
     return [dataclasses.replace(camera, name=f"cam{k}") for k, camera in enumerate(ordered, start=1)]
 
 
+def _azimuths(clip: MocapClip, cameras: list) -> list[float]:
+    """Each camera's horizontal angle from the subject's mean facing, seen from the subject [deg]."""
+    centre = np.nanmean(clip.keypoint("Hip"), axis=0)
+    facing = clip.facing()
+    left = np.cross(np.array([0.0, 1.0, 0.0]), facing)
+    angles = []
+    for camera in cameras:
+        direction = camera.center_world - centre
+        angles.append(float(np.degrees(np.arctan2(direction @ left, direction @ facing))))
+    return angles
+
+
 def _trc(names: list[str], positions: np.ndarray, rate: float) -> TrcData:
     count = positions.shape[0]
     return TrcData(list(names), np.arange(count) / rate, positions, "m", rate, np.arange(1, count + 1))
@@ -143,8 +155,8 @@ def _write(folder: Path, clip: MocapClip, key: dict, seed: int) -> None:
                 path = folder / condition / "masks" / camera.name / f"{frame:06d}.png"
                 if not cv2.imwrite(str(path), image.astype(np.uint8) * 255):
                     raise OSError(f"{path}: OpenCV cannot write this mask")
-    metadata = dict(key, cameras=[camera.name for camera in cameras], body_scale=body.scale,
-                    target_names=clip.target_names, seed=seed)
+    metadata = dict(key, cameras=[camera.name for camera in cameras], camera_azimuths_deg=_azimuths(clip, cameras),
+                    body_scale=body.scale, target_names=clip.target_names, seed=seed)
     (folder / "inputs.json").write_text(json.dumps(metadata, indent=2) + "\n")
 
 
