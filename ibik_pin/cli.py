@@ -1,4 +1,5 @@
-"""The `ibik` command: `ibik track` on the user's files, `ibik demo` on data the repository ships.
+"""The `ibik` command: `ibik track` on the user's files, `ibik calibrate` a subject's model on a static
+trial, `ibik demo` on data the repository ships.
 
 Bad input ends with one line on stderr and exit code 2; nothing half-written is left in OUTDIR.
 """
@@ -98,12 +99,48 @@ def _job(arguments: argparse.Namespace) -> TrackJob:
     )
 
 
+def _add_calibrate_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("static", type=Path, help="TRC of the subject's static trial (Pose2Sim keypoint names)")
+    parser.add_argument("--out", type=Path, required=True,
+                        help="the subject's URDF to write (NAME.urdf; NAME.calibration.json is written beside it)")
+    parser.add_argument("--model", type=Path, help="URDF of the human to start from (default: example-robot-data's)")
+    parser.add_argument("--frames", metavar="FIRST:LAST",
+                        help="TRC frame numbers of the static frames to fit, both included (default: all, "
+                             "at most 10 spread over them)")
+
+
+def _calibrate(arguments: argparse.Namespace) -> None:
+    """`ibik calibrate`: fit the subject on the static trial, write its URDF and figures, print them."""
+    import json
+
+    from ibik_pin.model import load_human
+    from ibik_pin.subject.calibration import calibrate_static_trial, parse_frame_range
+    from ibik_pin.subject.urdf import write_subject_urdf
+
+    frame_range = parse_frame_range(arguments.frames) if arguments.frames else (None, None)
+    if arguments.out.suffix.lower() != ".urdf":
+        raise IbikError(f"--out: expected a file name ending in .urdf, got {str(arguments.out)!r}")
+    body = load_human(arguments.model) if arguments.model is not None else load_human()
+    result = calibrate_static_trial(arguments.static, body, frame_range)
+    notes = write_subject_urdf(result.body, arguments.out)
+    figures = arguments.out.with_name(arguments.out.stem + ".calibration.json")
+    figures.write_text(json.dumps({
+        "static": str(arguments.static), "model": str(body.urdf_path), "urdf": str(arguments.out),
+        **result.to_json(), "notes": notes}, indent=2) + "\n")
+    for note in notes:
+        warnings.warn(note, stacklevel=1)
+    print(result.table())
+    print(f"wrote {arguments.out} and {figures}")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="ibik", description="Image-constrained inverse kinematics "
                                      "for markerless human motion capture")
     commands = parser.add_subparsers(dest="command", required=True)
     track = commands.add_parser("track", help="track a recorded sequence")
     _add_track_arguments(track)
+    calibrate = commands.add_parser("calibrate", help="fit the model to a subject's static trial, write it as URDF")
+    _add_calibrate_arguments(calibrate)
     demo = commands.add_parser("demo", help="track the bundled real motion, with and without image")
     demo.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder")
     demo.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -128,6 +165,8 @@ def main(argv: list[str] | None = None) -> int:
                 lines = report.summary_lines()
                 print(f"wrote {arguments.out}: {lines[0]}")
                 print("\n".join(lines[1:]))
+        elif arguments.command == "calibrate":
+            _calibrate(arguments)
         else:
             from ibik_pin.demo import run_demo
 

@@ -64,11 +64,13 @@ import copy
 import dataclasses
 import warnings
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 
 from ibik_pin.exceptions import InputError, SolverError, UnknownNameError
+from ibik_pin.io.trc import read_trc
 from ibik_pin.model import BodyModel
 from ibik_pin.subject.scaling import keypoint_lengths, neutral_stature, scale_human, segment_lengths_from_keypoints
 
@@ -80,8 +82,10 @@ __all__ = [
     "SHIFT_GROUPS",
     "CalibrationResult",
     "CalibrationSettings",
+    "calibrate_static_trial",
     "calibrate_subject",
     "check_subject_size",
+    "parse_frame_range",
     "select_frames",
 ]
 
@@ -89,9 +93,9 @@ _ALL = (1.0, 1.0, 1.0)
 _SAGITTAL = (1.0, 1.0, 0.0)
 _LATERAL = (0.0, 0.0, 1.0)
 
-#: Segment group -> (joint, axes) whose placement translation in its parent the group scales: the
-#: joints scale_human sizes. The hip joints' height and depth below the spine base stay as scaled
-#: (by the mean ratio): the spine base is seen by no keypoint.
+#: Segment group -> (joint, axes) whose placement translation in its parent the group scales.
+#: Together they cover every joint placement of example-robot-data's human; the trunk holds the
+#: pelvis (the hip joints' height and depth below the spine base) with the spine and clavicles.
 SCALE_GROUPS: dict[str, tuple[tuple[str, tuple[float, float, float]], ...]] = {
     "pelvis_width": (("left_hip_Z", _LATERAL), ("right_hip_Z", _LATERAL)),
     "left_thigh": (("left_knee_Z", _ALL),),
@@ -99,6 +103,8 @@ SCALE_GROUPS: dict[str, tuple[tuple[str, tuple[float, float, float]], ...]] = {
     "left_shank": (("left_ankle_Z", _ALL),),
     "right_shank": (("right_ankle_Z", _ALL),),
     "trunk": (
+        ("left_hip_Z", _SAGITTAL),
+        ("right_hip_Z", _SAGITTAL),
         ("middle_thoracic_Z", _ALL),
         ("middle_cervical_Z", _ALL),
         ("left_clavicle_joint_X", _ALL),
@@ -221,6 +227,7 @@ class CalibrationResult:
         segment_scales: group name of :data:`SCALE_GROUPS` -> length of the calibrated group
             over the input model's (1.0: unchanged).
         joint_shifts: shift name of :data:`SHIFT_GROUPS` -> its distance [m] (0: as scaled).
+        frame_numbers: the TRC frame numbers of ``frames``, when read from a file.
     """
 
     body: BodyModel
@@ -232,11 +239,13 @@ class CalibrationResult:
     offsets: np.ndarray
     segment_scales: dict[str, float]
     joint_shifts: dict[str, float]
+    frame_numbers: np.ndarray | None = None
 
     def to_json(self) -> dict:
         """The figures as plain JSON types (millimetres for residuals and offsets)."""
         return {
             "frames": [int(frame) for frame in self.frames],
+            "trc_frame_numbers": None if self.frame_numbers is None else [int(n) for n in self.frame_numbers],
             "segment_scales": {name: round(value, 5) for name, value in self.segment_scales.items()},
             "joint_shifts_mm": {name: _mm(value) for name, value in self.joint_shifts.items()},
             "keypoints": {
@@ -401,10 +410,16 @@ def calibrate_subject(
 
     lengths = segment_lengths_from_keypoints(names, points)
     check_subject_size(body, lengths, source)
-    # The start, and the "before" figures: lengths-only scaling, every length included.
-    problem = _Problem(scale_human(body, lengths), names, points, present, settings)
+    # The "before" figures: lengths-only scaling, every length included, the poses fitted.
+    scaled = scale_human(body, lengths)
+    baseline = _Problem(scaled, names, points, present, settings)
+    baseline.solve_poses()
+    before = baseline.keypoint_residuals()
+    # The start: the same with the pelvis in the spine's proportion, from the baseline's poses.
+    problem = _Problem(_pelvis_as_spine(dataclasses.replace(scaled, model=copy.deepcopy(scaled.model)), body),
+                       names, points, present, settings)
+    problem.q = baseline.q.copy()
     problem.solve_poses()
-    before = problem.keypoint_residuals()
     problem.solve_all()
     after = problem.keypoint_residuals()
     calibrated = problem.calibrated_body()
@@ -423,6 +438,79 @@ def calibrate_subject(
         joint_shifts={name: float(value) for (name, _), value in zip(problem.groups, problem.scales, strict=True)
                       if name in SHIFT_GROUPS},
     )
+
+
+def _pelvis_as_spine(start: BodyModel, original: BodyModel) -> BodyModel:
+    """The scaled body with its pelvis (the hip joints' height and depth below the spine base) in
+    the spine's proportion, as the trunk group of :data:`SCALE_GROUPS` moves them; scale_human
+    sizes the pelvis by the mean ratio of every length. Modifies and returns ``start``."""
+    model, before = start.model, original.model
+    joints = ("middle_thoracic_Z", "left_hip_Z", "right_hip_Z")
+    if not all(model.existJointName(joint) and before.existJointName(joint) for joint in joints):
+        return start
+    spine = np.linalg.norm(before.jointPlacements[before.getJointId(joints[0])].translation)
+    if spine == 0.0:
+        return start
+    ratio = np.linalg.norm(model.jointPlacements[model.getJointId(joints[0])].translation) / spine
+    sagittal = np.asarray(_SAGITTAL)
+    for hip in joints[1:]:
+        index = model.getJointId(hip)
+        translation = (1.0 - sagittal) * model.jointPlacements[index].translation + sagittal * ratio * (
+            before.jointPlacements[before.getJointId(hip)].translation)
+        model.jointPlacements[index] = pin.SE3(model.jointPlacements[index].rotation, translation)
+    return start
+
+
+def parse_frame_range(text: str) -> tuple[int | None, int | None]:
+    """``FIRST:LAST`` (TRC frame numbers, both included; either may be left out) as a pair.
+
+    Raises:
+        InputError: not of that form, or FIRST after LAST.
+    """
+    first, colon, last = text.partition(":")
+    try:
+        bounds = (int(first) if first.strip() else None, int(last) if last.strip() else None)
+    except ValueError:
+        bounds = None
+    if not colon or bounds is None:
+        raise InputError(f"--frames: expected FIRST:LAST (TRC frame numbers, e.g. 1:30), got {text!r}")
+    if bounds[0] is not None and bounds[1] is not None and bounds[0] > bounds[1]:
+        raise InputError(f"--frames: FIRST must not be after LAST, got {text!r}")
+    return bounds
+
+
+def calibrate_static_trial(
+    path: str | Path,
+    body: BodyModel,
+    frame_range: tuple[int | None, int | None] = (None, None),
+    settings: CalibrationSettings | None = None,
+) -> CalibrationResult:
+    """:func:`calibrate_subject` on a static trial's TRC file (m, cm or mm as its header says).
+
+    Args:
+        path: the TRC file; its markers are Pose2Sim keypoint names, every one known to the body.
+        body: the human to calibrate (not modified).
+        frame_range: (first, last) TRC frame numbers (``Frame#``) to use, both included; None for
+            the file's first or last frame.
+        settings: the calibration's weights.
+
+    Raises:
+        FileFormatError: the file cannot be read.
+        InputError, UnknownNameError: see :func:`calibrate_subject`; no frame in the range.
+    """
+    trc = read_trc(path).in_metres()
+    first, last = frame_range
+    numbers = trc.frame_numbers
+    if numbers.size == 0:
+        raise InputError(f"{path}: no frame")
+    selected = np.flatnonzero((numbers >= (numbers.min() if first is None else first))
+                              & (numbers <= (numbers.max() if last is None else last)))
+    if selected.size == 0:
+        raise InputError(f"{path}: no frame numbered {first}:{last} (its frames are "
+                         f"{numbers.min()} to {numbers.max()})")
+    result = calibrate_subject(body, trc.marker_names, trc.positions, settings, frames=selected, source=str(path))
+    result.frame_numbers = numbers[result.frames]
+    return result
 
 
 def _group_length(model: pin.Model, group: str) -> float:
