@@ -90,3 +90,42 @@ def test_segment_length_scales_the_joint_offset():
     assert np.isclose(np.linalg.norm(data.oMf[body.frame_id("Elbow")].translation), 0.31)
     with pytest.raises(InputError, match="must be positive"):
         set_segment_length(body.model, "elbow_Z", -1.0)
+
+
+def human_with_keypoint_links(tmp_path, links: dict[str, tuple[str, tuple[float, float, float]]]):
+    """The installed human.urdf with keypoint links added: name -> (parent link, origin [m])."""
+    text = human_urdf_path().read_text()
+    extra = "".join(
+        f'<link name="keypoint_{name}"/><joint name="keypoint_{name}_joint" type="fixed"><parent link="{parent}"/>'
+        f'<child link="keypoint_{name}"/><origin xyz="{x} {y} {z}" rpy="0 0 0"/></joint>'
+        for name, (parent, (x, y, z)) in links.items())
+    path = tmp_path / "subject.urdf"
+    path.write_text(text.replace("</robot>", extra + "</robot>"))
+    return path
+
+
+def test_the_installed_human_is_not_a_calibrated_subject(human):
+    assert not human.calibrated
+    assert human.urdf_path == human_urdf_path()
+
+
+def test_keypoint_links_of_a_urdf_replace_the_default_placements(human, tmp_path):
+    path = human_with_keypoint_links(tmp_path, {"LElbow": ("left_upperarm", (0.01, -0.25, 0.0)),
+                                                "LEar": ("middle_head", (0.0, 0.1, -0.08))})
+    body = load_human(path)
+    assert body.calibrated
+    assert list(body.keypoints)[:len(human.keypoints)] == list(human.keypoints)
+    assert "LEar" in body.keypoints
+    data, default = body.model.createData(), human.model.createData()
+    q = pin.neutral(body.model)
+    pin.framesForwardKinematics(body.model, data, q)
+    pin.framesForwardKinematics(human.model, default, q)
+    shoulder = data.oMf[body.frame_id("LShoulder")].translation
+    assert np.allclose(data.oMf[body.frame_id("LElbow")].translation - shoulder, [0.01, -0.25, 0.0], atol=1e-12)
+    assert np.allclose(data.oMf[body.frame_id("LWrist")].translation, default.oMf[human.frame_id("LWrist")].translation)
+
+
+def test_a_keypoint_link_named_after_a_frame_is_refused(tmp_path):
+    path = human_with_keypoint_links(tmp_path, {"middle_pelvis": ("middle_pelvis", (0.0, 0.0, 0.0))})
+    with pytest.raises(FileFormatError, match="keypoint_middle_pelvis"):
+        load_human(path)
