@@ -275,3 +275,10 @@ def test_calibrating_a_file_keeps_its_frame_numbers(recovery, tmp_path):
     write_static(tmp_path / "static.trc", positions)
     result = calibrate_static_trial(tmp_path / "static.trc", copy.deepcopy(load_human()), (3, None), PROTOCOL)
     assert list(result.frame_numbers) == [3, 4]
+
+
+def test_a_calibrated_subject_is_not_calibrated_again(recovery, tmp_path):
+    _, positions, result = recovery
+    write_subject_urdf(result.body, tmp_path / "subject.urdf")
+    with pytest.raises(InputError, match="already a calibrated subject"):
+        calibrate_subject(load_human(tmp_path / "subject.urdf"), NAMES, positions)

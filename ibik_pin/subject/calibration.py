@@ -352,8 +352,8 @@ def calibrate_subject(
     """Fit segment scales, keypoint placements and poses to a static trial.
 
     Args:
-        body: the human (:func:`~ibik_pin.model.load_human`), not modified; its keypoints must be
-            operational frames (keypoint frames of a URDF are).
+        body: the human (:func:`~ibik_pin.model.load_human`), not modified and not a calibrated
+            subject already; its keypoints must be operational frames.
         names: the K keypoint names of the trial, all known to the body.
         positions: shape (F, K, 3) or (K, 3) [m], in any world frame (the root pose is fitted);
             NaN marks a keypoint missing in a frame.
@@ -368,10 +368,15 @@ def calibrate_subject(
     Raises:
         UnknownNameError: a name is not a keypoint of the body.
         InputError: wrong shapes, fewer than :data:`MIN_KEYPOINTS` keypoints present, no frame
-            with 3 keypoints, segments of an implausible size (wrong units).
+            with 3 keypoints, segments of an implausible size (wrong units), a calibrated body.
         SolverError: the least-squares solver failed.
     """
     settings = settings or CalibrationSettings()
+    if body.calibrated:
+        # Its keypoints are placed on the segments they were fitted with: scaling its segments again
+        # would leave them behind. The model it was made from is the one to calibrate.
+        raise InputError(f"body: {body.urdf_path or 'the model'} is already a calibrated subject; calibrate the "
+                         "model it was made from (e.g. the default human) on the new static trial")
     names = list(names)
     points = np.asarray(positions, dtype=float)
     if points.ndim == 2:
