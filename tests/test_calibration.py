@@ -183,8 +183,8 @@ def test_the_saved_urdf_reloads_with_the_same_keypoints(recovery, tmp_path):
         pin.framesForwardKinematics(result.body.model, first, q)
         pin.framesForwardKinematics(reloaded.model, second, q)
         for name in reloaded.keypoints:
-            difference = first.oMf[result.body.frame_id(name)].translation - second.oMf[reloaded.frame_id(name)].translation
-            assert np.linalg.norm(difference) < 1e-9, name
+            saved = first.oMf[result.body.frame_id(name)].translation
+            assert np.linalg.norm(saved - second.oMf[reloaded.frame_id(name)].translation) < 1e-9, name
     np.testing.assert_allclose(reloaded.segment_radii, result.body.segment_radii, rtol=1e-9)
     geometry = pin.buildGeomFromUrdf(reloaded.model, str(tmp_path / "subject.urdf"), pin.GeometryType.VISUAL)
     assert geometry.ngeoms > 0
@@ -282,3 +282,10 @@ def test_a_calibrated_subject_is_not_calibrated_again(recovery, tmp_path):
     write_subject_urdf(result.body, tmp_path / "subject.urdf")
     with pytest.raises(InputError, match="already a calibrated subject"):
         calibrate_subject(load_human(tmp_path / "subject.urdf"), NAMES, positions)
+
+
+def test_targets_in_millimetres_labelled_metres_are_refused_before_scaling(recovery, tmp_path):
+    _, positions, _ = recovery
+    job = TrackJob(targets=tmp_path / "targets.trc", out=tmp_path / "out")
+    with pytest.raises(InputError, match="the data look like mm"):
+        prepare_body(job, NAMES, 1000.0 * positions)

@@ -277,7 +277,7 @@ def _mm(value: float) -> float:
     return round(1000.0 * float(value), 2)
 
 
-def select_frames(frame_count: int, frames: slice | Sequence[int] | None, max_frames: int) -> np.ndarray:
+def select_frames(frame_count: int, frames: slice | Sequence[int] | np.ndarray | None, max_frames: int) -> np.ndarray:
     """Indices of the static frames to fit: the given ones (a slice or indices), at most
     ``max_frames`` of them evenly spread.
 
@@ -346,7 +346,7 @@ def calibrate_subject(
     names: Sequence[str],
     positions: np.ndarray,
     settings: CalibrationSettings | None = None,
-    frames: slice | Sequence[int] | None = None,
+    frames: slice | Sequence[int] | np.ndarray | None = None,
     source: str = "static trial",
 ) -> CalibrationResult:
     """Fit segment scales, keypoint placements and poses to a static trial.

@@ -162,7 +162,8 @@ def _keypoint_array(keypoints, positions) -> tuple[list[str], np.ndarray]:
             arrays.append(np.atleast_2d(array))
         frame_counts = {array.shape[0] for array in arrays}
         if len(frame_counts) > 1:
-            raise InputError(f"keypoints: expected the same number of frames for every keypoint, got {sorted(frame_counts)}")
+            raise InputError("keypoints: expected the same number of frames for every keypoint, got "
+                             f"{sorted(frame_counts)}")
         points = np.stack(arrays, axis=1) if arrays else np.zeros((1, 0, 3))
     else:
         if isinstance(keypoints, str):
@@ -339,7 +340,7 @@ class _Edit:
     vector."""
 
     kind: str
-    name: str
+    name: str | None  # None: the body lacks the keypoint (_check_edits reports it)
     mask: tuple[float, float, float] = _ALL
     additive: tuple[float, float, float] | None = None
 
@@ -408,7 +409,7 @@ def _check_edits(body: BodyModel, name: str, edits: list[_Edit]) -> None:
     needed = [k for k in (first, second) if k != MID_HIP] + (["LHip", "RHip"] if MID_HIP in (first, second) else [])
     missing = [k for k in needed if k not in body.keypoints or not model.existFrame(body.keypoints[k])]
     missing += [
-        edit.name for edit in edits
+        str(edit.name) for edit in edits
         if edit.name is None
         or (edit.kind == "joint" and not model.existJointName(edit.name))
         or (edit.kind == "frame" and not model.existFrame(edit.name))
@@ -447,10 +448,10 @@ def _set_length(body: BodyModel, name: str, length: float) -> None:
     starts = [_translation(model, edit) for edit in edits]
     directions = [
         np.asarray(edit.additive) if edit.additive is not None else np.asarray(edit.mask) * start
-        for edit, start in zip(edits, starts)
+        for edit, start in zip(edits, starts, strict=True)
     ]
     a = measure(model)
-    for edit, start, direction in zip(edits, starts, directions):
+    for edit, start, direction in zip(edits, starts, directions, strict=True):
         _set_translation(model, edit, start + direction)
     b = measure(model) - a  # the length vector is affine in theta: every rotation is fixed
     quadratic, half_linear, constant = b @ b, a @ b, a @ a - length**2
@@ -462,7 +463,7 @@ def _set_length(body: BodyModel, name: str, length: float) -> None:
     else:
         roots = (-half_linear + np.array([-1.0, 1.0]) * np.sqrt(discriminant)) / quadratic
         theta = float(roots[np.argmin(np.abs(roots))])  # the smaller move keeps the model's layout
-    for edit, start, direction in zip(edits, starts, directions):
+    for edit, start, direction in zip(edits, starts, directions, strict=True):
         _set_translation(model, edit, start + theta * direction)
     achieved = float(np.linalg.norm(a + theta * b))
     if abs(achieved - length) > 1e-3:

@@ -55,9 +55,13 @@ def write_subject_urdf(body: BodyModel, path: str | Path) -> list[str]:
     robot = tree.getroot()
     _remove_keypoint_links(robot)
     model = body.model
-    joints = {element.get("name"): element for element in robot.findall("joint")}
-    children = {element.find("child").get("link"): element for element in joints.values()}
-    root_links = [link.get("name") for link in robot.findall("link") if link.get("name") not in children]
+    # joint name -> (parent link, child link, element)
+    joints = {_required(element, ".", "name", source): (_required(element, "parent", "link", source),
+                                                       _required(element, "child", "link", source), element)
+              for element in robot.findall("joint")}
+    parents = {child: parent for parent, child, _ in joints.values()}  # link -> its parent link
+    root_links = [name for name in (_required(link, ".", "name", source) for link in robot.findall("link"))
+                  if name not in parents]
     if len(root_links) != 1:
         raise FileFormatError(f"URDF {str(source)!r}: expected one root link, got {root_links}")
     root_link = root_links[0]
@@ -70,9 +74,7 @@ def write_subject_urdf(body: BodyModel, path: str | Path) -> list[str]:
 
     old_lengths: dict[str, float] = {}
     new_lengths: dict[str, float] = {}
-    for name, element in joints.items():
-        parent = element.find("parent").get("link")
-        child = element.find("child").get("link")
+    for name, (parent, child, element) in joints.items():
         if element.get("type") == "fixed":
             placement = link_placement(parent).inverse() * link_placement(child)
         elif model.existJointName(name):
@@ -84,9 +86,7 @@ def write_subject_urdf(body: BodyModel, path: str | Path) -> list[str]:
         new_lengths[parent] = new_lengths.get(parent, 0.0) + float(np.linalg.norm(placement.translation))
         _set_origin(element, placement)
 
-    parents = {child: element.find("parent").get("link") for child, element in children.items()}
-
-    def link_factor(link: str) -> float:
+    def link_factor(link: str | None) -> float:
         """How much a link grew: its child joints' distances, or its parent link's factor."""
         while link is not None:
             if old_lengths.get(link, 0.0) > 1e-6:
@@ -114,11 +114,11 @@ def write_subject_urdf(body: BodyModel, path: str | Path) -> list[str]:
             scale = np.array([float(v) for v in mesh.get("scale", "1 1 1").split()]) * factor
             mesh.set("scale", _numbers(scale))
 
-    joint_links = {name: element.find("child").get("link") for name, element in joints.items()}
     for keypoint, frame_name in body.keypoints.items():
         frame = model.frames[model.getFrameId(frame_name)]
         joint_name = model.names[frame.parentJoint]
-        parent_link = joint_links.get(joint_name, root_link)  # the free-flyer (or universe) carries the root
+        # the free-flyer (or the universe) carries the root link
+        parent_link = joints[joint_name][1] if joint_name in joints else root_link
         placement = link_placement(parent_link).inverse() * frame.placement
         link_name = KEYPOINT_LINK_PREFIX + keypoint
         ElementTree.SubElement(robot, "link", name=link_name)
@@ -137,6 +137,16 @@ def write_subject_urdf(body: BodyModel, path: str | Path) -> list[str]:
     except OSError as error:
         raise FileFormatError(f"{path}: cannot write the URDF: {error}") from error
     return notes
+
+
+def _required(element: ElementTree.Element, path: str, attribute: str, source: Path) -> str:
+    """An attribute the URDF must have (a joint's parent and child links, names)."""
+    node = element.find(path)
+    value = None if node is None else node.get(attribute)
+    if value is None:
+        raise FileFormatError(f"URDF {str(source)!r}: a {element.tag} {element.get('name', '')!r} lacks "
+                              f"{attribute!r} in {path!r}")
+    return value
 
 
 def _remove_keypoint_links(robot: ElementTree.Element) -> None:
