@@ -5,14 +5,19 @@ marker placer moves each marker onto the static trial), done here as one regular
 fit. Scaling alone leaves a data set's keypoints where the model puts them; when the data's Neck,
 Head or shoulders sit elsewhere on the body (DESIGN.md, "Real data": 30-75 mm on real mocap with
 segment lengths within 1 cm), tracking spreads that mismatch over the arms. Here every keypoint
-present in the static trial gets its own 3D placement on its parent joint.
+present in the static trial gets its own 3D placement on its segment.
 
-The unknowns, from a start model scaled by :func:`~ibik_pin.subject.scaling.scale_human` with the
-static trial's segment lengths:
+The start is lengths-only scaling (:func:`~ibik_pin.subject.scaling.scale_human` with every length
+the static trial measures; its pelvis then in the spine's proportion, see :data:`SCALE_GROUPS`).
+The unknowns:
 
 * the pose ``q_f`` of each static frame f (free-flyer and joint angles, inside the joint limits);
-* the placement ``o_k`` [m] of every keypoint k present, in its parent joint's frame (the keypoint
-  frame's translation; the start model's placement ``o_k^0`` is the prior);
+* the placement ``o_k`` [m] of every keypoint k present, in its parent joint's frame; the start's
+  placement ``o_k^0`` is the prior. A keypoint at a joint's centre (hips, knees, ankles,
+  shoulders, elbows, wrists, the Neck) is moved first onto the proximal segment, at the same
+  place, and its placement counts from that joint's centre: on the joint's own frame any offset
+  would make its target hold that joint's rotation during tracking (a hip target 1 mm off the
+  hip's axes locks the hip's flexion at the targets' priority, out of the image criterion's reach);
 * one parameter per joint group: the scale of each segment of :data:`SCALE_GROUPS` (its joint
   placements times s along the group's axes) and the distance [m] of each shift of
   :data:`SHIFT_GROUPS` (how high the shoulders sit on the trunk).
@@ -20,41 +25,39 @@ static trial's segment lengths:
 The cost, every residual in metres::
 
     sum_f sum_k present rho(|p_k(q_f; o, s) - x_fk|)                     (the static trial)
-  + sum_k (offset_weight * stiffness_k * |o_k - o_k^0|)^2                 (default placements)
-  + sum_g (scale_weight * |joint displacement of group g|)^2              (measured lengths)
-  + sum_f sum_j (posture_weight_j * q_fj)^2                               (reference posture)
+  + sum_k (offset_weight * stiffness_k * |o_k - o_k^0|)^2                 (the start's placements)
+  + sum_g (scale_weight * |joint displacement of group g|)^2              (the measured lengths)
+  + sum_f sum_j (posture_weight_j * q_fj)^2                               (the reference posture)
 
 where rho is Huber's loss (quadratic up to ``robust_scale``, linear beyond).
 
-Identifiability, and what the weights decide:
+Identifiability, and what the weights decide (defaults in :class:`CalibrationSettings`):
 
 * An offset along a segment trades with that segment's length, and some trades are exact for every
-  pose (a hip keypoint's lateral offset and the pelvis width: the hip's first axis is lateral).
-  Both cost per metre moved: a joint ``scale_weight`` (0.1), a keypoint ``offset_weight *
-  stiffness`` (0.1 for Neck, Head, Nose, Hip, feet and hands; 0.3 for the shoulders; 1.0 for the
-  joint centres). The lengths measured between joint-centre keypoints thus stay unless the data
-  argues, and a keypoint away from any joint (Neck, Head) moves as freely as a length.
-* The keypoints at a joint centre (hips, knees, ankles, elbows, wrists) are stiff
-  (``joint_centre_stiffness``): their offsets grow only when the data says so consistently, over
-  frames, where no pose can explain it. Their placement defines what a tracked knee or elbow means.
+  pose (a hip keypoint's lateral offset and the pelvis width). Both cost per metre moved: a joint
+  ``scale_weight`` (0.1), a keypoint ``offset_weight * stiffness`` (0.1 for Neck, Head, Nose, Hip,
+  feet and hands; 0.3 for the shoulders; 1.0 for the joint centres). The lengths measured between
+  joint-centre keypoints stay unless the data argues; a keypoint away from any joint moves as
+  freely as a length.
+* The joint-centre keypoints are stiff (``joint_centre_stiffness``): their offsets grow only when
+  the data says so consistently, over frames, where no pose can explain it. Their placement
+  defines what a tracked knee or elbow means.
 * On one frame an offset also trades with the pose (a Head forward or a bowed head). The static
-  trial is taken as the reference posture, as OpenSim's marker placer does: spine and clavicles
-  are pulled toward the model's neutral pose (``trunk_posture_weight``), the neck less
-  (``neck_posture_weight``), the limbs only lightly (``limb_posture_weight``, for the rotations no
-  keypoint sees). The trunk's angles are seen by hips and shoulders, the neck's by Neck, Head and
-  Nose: the weights only settle what those leave open (a constant angle over every frame against
-  a placement).
+  trial is taken as the reference posture, as OpenSim's marker placer does: the spine, clavicles
+  and neck are pulled toward the model's neutral pose (``spine_posture_weight``,
+  ``clavicle_posture_weight``, ``neck_posture_weight``), the limbs only lightly
+  (``limb_posture_weight``, for the rotations no keypoint sees). The weights only settle what the
+  keypoints leave open (a constant angle over every frame against a placement).
 * Several frames with different limb poses make placements and lengths identifiable from the
   data alone (a joint centre is what a limb turns about); a single standing frame leaves them to
-  the weights above. Whatever never moves in the static trial stays a trade: with an upright
-  trunk in every frame, the trunk's length and the Neck's and Head's height on it only show
-  together (the keypoints' positions are right either way).
+  the weights. Whatever never moves in the static trial stays a trade: with an upright trunk in
+  every frame, the trunk's length and the height of the Neck and Head on it only show together
+  (the keypoints' positions are right either way).
 
-The fit runs in two stages: the poses alone on the start model, then poses, placements and groups
-together (Levenberg-Marquardt with analytic Jacobians; the placements are eliminated through the
-per-frame pose blocks, so a step costs F small solves; joint limits and placement bounds are kept
-by clipping). The "before" figures are the static fit of the model that lengths-only scaling gives
-(:func:`~ibik_pin.subject.scaling.scale_human` with every length, poses fitted alike).
+The fit runs in two stages: the poses alone, then poses, placements and groups together
+(Levenberg-Marquardt with analytic Jacobians; the placements are eliminated through the per-frame
+pose blocks, so a step costs F small solves; joint limits and placement bounds are kept by
+clipping). The "before" figures are the static fit, poses alike, of lengths-only scaling.
 """
 
 from __future__ import annotations
@@ -155,9 +158,9 @@ class CalibrationSettings:
     """Weights of the calibration cost (module docstring) and how hard to solve it.
 
     Attributes:
-        offset_weight: cost of moving a keypoint from its default placement, per metre, relative
-            to a keypoint missed in one frame (dimensionless). 0.1: a 4 cm placement costs what a
-            4 mm miss does in one frame.
+        offset_weight: cost of moving a keypoint from the start's placement, per metre, relative
+            to a keypoint missed in one frame (dimensionless). 0.1: a 4 cm move costs what a 4 mm
+            miss does in one frame.
         joint_centre_stiffness: factor on ``offset_weight`` for :data:`JOINT_CENTRE_KEYPOINTS`.
         shoulder_stiffness: factor on ``offset_weight`` for :data:`SHOULDER_KEYPOINTS`.
         scale_weight: cost of moving a joint by a segment scale or a shift, per metre of the
@@ -168,11 +171,11 @@ class CalibrationSettings:
         clavicle_posture_weight: pull of the clavicles' elevation toward neutral [m/rad].
             Stronger than the shoulder-height shift's cost: shoulders higher than the model's in
             the static trial are the subject's build more often than a shrug.
-        neck_posture_weight: pull of the neck's angles toward neutral [m/rad]. Weaker than the
-            trunk's: a Head and a Nose a few centimetres forward of the model's are a bowed head
-            more often than another head shape.
+        neck_posture_weight: pull of the neck's angles toward neutral [m/rad]. Weak: a Head and
+            a Nose a few centimetres forward of the model's are a bowed head more often than
+            another head shape.
         limb_posture_weight: pull of every other joint angle toward neutral [m/rad].
-        max_offset: bound on each coordinate of a keypoint's move from its default [m].
+        max_offset: bound on each coordinate of a keypoint's move from the start's placement [m].
         max_shift: bound on a joint shift of :data:`SHIFT_GROUPS` [m].
         max_frames: at most this many static frames, evenly spread, are fitted.
         robust_scale: keypoint distance [m] beyond which a miss counts linearly, not squared
@@ -222,8 +225,9 @@ class CalibrationResult:
         residual_before: per keypoint, [mean, max] over frames of the distance to the static
             trial with lengths-only scaling (the start model, poses fitted), shape (K, 2) [m].
         residual_after: the same with the calibrated model, shape (K, 2) [m].
-        offsets: per keypoint, the calibrated placement minus the model's default placement (as
-            scaled by the segment lengths), in its parent joint's frame, shape (K, 3) [m].
+        offsets: per keypoint, the calibrated placement minus the start's (lengths-only scaling),
+            in its parent joint's frame (for a keypoint at a joint centre: the proximal segment's
+            joint frame, from that centre), shape (K, 3) [m].
         segment_scales: group name of :data:`SCALE_GROUPS` -> length of the calibrated group
             over the input model's (1.0: unchanged).
         joint_shifts: shift name of :data:`SHIFT_GROUPS` -> its distance [m] (0: as scaled).
