@@ -113,6 +113,7 @@ def _calibrate(arguments: argparse.Namespace) -> None:
     """`ibik calibrate`: fit the subject on the static trial, write its URDF and figures, print them."""
     import json
 
+    from ibik_pin.exceptions import IbikWarning
     from ibik_pin.model import load_human
     from ibik_pin.subject.calibration import calibrate_static_trial, parse_frame_range
     from ibik_pin.subject.urdf import write_subject_urdf
@@ -128,7 +129,7 @@ def _calibrate(arguments: argparse.Namespace) -> None:
         "static": str(arguments.static), "model": str(body.urdf_path), "urdf": str(arguments.out),
         **result.to_json(), "notes": notes}, indent=2) + "\n")
     for note in notes:
-        warnings.warn(note, stacklevel=1)
+        warnings.warn(note, IbikWarning, stacklevel=1)
     print(result.table())
     print(f"wrote {arguments.out} and {figures}")
 
