@@ -12,7 +12,7 @@ import pytest
 from ibik_pin.cli import main
 from ibik_pin.exceptions import InputError, UnknownNameError
 from ibik_pin.io.trc import TrcData, write_trc
-from ibik_pin.model import load_human
+from ibik_pin.model import human_urdf_path, load_human
 from ibik_pin.subject.calibration import (
     JOINT_CENTRE_KEYPOINTS,
     SCALE_GROUPS,
@@ -289,3 +289,16 @@ def test_targets_in_millimetres_labelled_metres_are_refused_before_scaling(recov
     job = TrackJob(targets=tmp_path / "targets.trc", out=tmp_path / "out")
     with pytest.raises(InputError, match="the data look like mm"):
         prepare_body(job, NAMES, 1000.0 * positions)
+
+
+def test_a_mesh_that_cannot_be_found_is_dropped_with_a_note(tmp_path):
+    source = tmp_path / "human.urdf"
+    text = human_urdf_path().read_text()
+    source.write_text(text.replace("package://example-robot-data/robots/human_description/meshes/pelvis_mesh.STL",
+                                   "meshes/missing.STL", 1))
+    notes = write_subject_urdf(load_human(source), tmp_path / "subject.urdf")
+    assert len(notes) == 1 and "middle_pelvis" in notes[0] and "missing.STL" in notes[0]
+    written = (tmp_path / "subject.urdf").read_text()
+    assert "missing.STL" not in written
+    assert written.count("<mesh ") == text.count("<mesh ") - 1
+    assert "file://" in written and "package://" not in written
