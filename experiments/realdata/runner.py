@@ -28,7 +28,7 @@ import numpy as np
 from paper.section4 import DEFECT_MASK_FILTER_RADIUS
 
 from ibik_pin.exceptions import InputError, UnknownNameError
-from ibik_pin.io.trc import read_trc
+from ibik_pin.io.trc import read_trc, write_trc
 from ibik_pin.tracking.pipeline import TrackJob, run_track
 from ibik_pin.tracking.tracker import TrackingSettings
 from realdata.clips import CLIPS, ESTIMATED
@@ -170,18 +170,34 @@ class RunResult:
 
 
 def run_variant(inputs: ClipInputs, chosen: Variant, condition: str, overrides: dict | None = None,
-                out: Path | None = None) -> RunResult:
-    """``ibik track`` on the clip's files as a user runs it; out: where its outputs go (None: a
-    temporary folder, removed afterwards)."""
+                out: Path | None = None, drop_targets: typing.Sequence[str] = ()) -> RunResult:
+    """``ibik track`` on the clip's files as a user runs it.
+
+    Args:
+        out: where its outputs go (None: a temporary folder, removed afterwards).
+        drop_targets: target keypoints left out of the targets file (e.g. LBigToe, RBigToe: with
+            the ankle and the toe both targets, the model's 6-DOF leg has no swivel left).
+    """
     if condition not in CONDITIONS:
         raise UnknownNameError(f"condition: expected one of {', '.join(CONDITIONS)}, got {condition!r}")
     if chosen.views > len(inputs.cameras):
         raise InputError(f"variant {chosen.name}: {chosen.views} views, the rig has {len(inputs.cameras)}")
+    unknown = [name for name in drop_targets if name not in inputs.target_names]
+    if unknown:
+        raise UnknownNameError(f"drop_targets: {unknown} are not targets; targets: {', '.join(inputs.target_names)}")
     single_threaded_math()
-    temporary = out is None
-    out = Path(tempfile.mkdtemp(prefix="real_mocap_")) / "run" if temporary else Path(out)
+    scratch = Path(tempfile.mkdtemp(prefix="real_mocap_"))
+    out = scratch / "run" if out is None else Path(out)
+    targets = read_trc(inputs.targets(condition))
+    targets_path = inputs.targets(condition)
+    if drop_targets:
+        kept = [k for k, name in enumerate(targets.marker_names) if name not in drop_targets]
+        targets = dataclasses.replace(targets, marker_names=[targets.marker_names[k] for k in kept],
+                                      positions=targets.positions[:, kept])
+        targets_path = scratch / "targets.trc"
+        write_trc(targets_path, targets)
     job = TrackJob(
-        targets=inputs.targets(condition), out=out, static=inputs.static,
+        targets=targets_path, out=out, static=inputs.static,
         calibration=inputs.calibration if chosen.views else None,
         masks=inputs.masks(condition) if chosen.views else None,
         cameras=inputs.cameras[:chosen.views] if chosen.views else None,
@@ -193,9 +209,8 @@ def run_variant(inputs: ClipInputs, chosen: Variant, condition: str, overrides: 
         wall = time.perf_counter() - started
         estimate = read_trc(out / "joints.trc").in_metres()
     finally:
-        if temporary:
-            shutil.rmtree(out.parent, ignore_errors=True)
-    targets = read_trc(inputs.targets(condition)).in_metres()
+        shutil.rmtree(scratch, ignore_errors=True)
+    targets = targets.in_metres()
 
     def positions(data, names: typing.Sequence[str]) -> np.ndarray:
         return data.positions[:, [data.marker_names.index(name) for name in names]]
@@ -210,7 +225,7 @@ def run_variant(inputs: ClipInputs, chosen: Variant, condition: str, overrides: 
 
 def run_one(clip: str, variant_name: str = "ibik2v", condition: str = "clean", frames: int = 120,
             settings: dict | None = None, data: Path = DEFAULT_DATA, cache: Path = DEFAULT_CACHE,
-            out: Path | None = None) -> RunResult:
+            out: Path | None = None, drop_targets: typing.Sequence[str] = ()) -> RunResult:
     """One variant on one clip of :data:`CLIPS` (inputs rendered once into `cache`, then reused).
 
     Args:
@@ -220,11 +235,12 @@ def run_one(clip: str, variant_name: str = "ibik2v", condition: str = "clean", f
         frames: frames of the window at 60 Hz.
         settings: TrackingSettings overrides, e.g. {"criterion": "two-way", "iterations": 30}.
         out: where ``ibik track`` writes (None: a temporary folder).
+        drop_targets: target keypoints to leave out, e.g. ("LBigToe", "RBigToe").
     """
     if clip not in CLIPS:
         raise UnknownNameError(f"clip: expected one of {', '.join(CLIPS)}, got {clip!r}")
     inputs = prepare_inputs(CLIPS[clip], Path(data), frames, Path(cache))
-    return run_variant(inputs, variant(variant_name), condition, settings, out)
+    return run_variant(inputs, variant(variant_name), condition, settings, out, drop_targets)
 
 
 def _mean(values: typing.Iterable[float]) -> float | None:
