@@ -53,12 +53,12 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
                         help="vote each silhouette pixel over the 2R+1 frames around it, to remove "
                              "segmentation flicker (default 0: off)")
     # The tracker's CRITERIA, written here so that `ibik --help` need not import the tracker.
-    parser.add_argument("--criterion", choices=("paper", "two-way"), default="paper",
-                        help="image criterion: paper, the overlap of eq. (5)-(6) (default), or two-way, "
-                             "that overlap plus the silhouette's medial axis explained by the skeleton")
-    parser.add_argument("--swivel-search", action="store_true",
+    parser.add_argument("--criterion", choices=("paper", "two-way"), default="two-way",
+                        help="image criterion: two-way (default), the overlap of eq. (5)-(6) plus the "
+                             "silhouette's medial axis explained by the skeleton; paper: the overlap alone")
+    parser.add_argument("--swivel-search", action=argparse.BooleanOptionalAction, default=True,
                         help="after each frame, search every free elbow's and knee's swivel on the image "
-                             "criterion (experimental: see the README's real-data results)")
+                             "criterion and pull it to a clearly better one (default: on)")
     parser.add_argument("--trc-axes", choices=("auto", "y-up", "z-up"), default="auto",
                         help="axis convention of the TRC files: y-up as Pose2Sim and OpenSim write "
                              "them, z-up in the calibration's own world (as many mocap systems "

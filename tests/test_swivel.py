@@ -73,3 +73,20 @@ def test_the_search_hints_the_elbow_back_toward_the_pose_of_the_silhouette(human
 def test_a_search_needs_three_samples(human):
     with pytest.raises(InputError, match="at least 3"):
         SwivelSearch(human, [], samples=2)
+
+
+def test_views_cross_only_when_two_optical_axes_are_far_from_parallel():
+    from ibik_pin.tracking.swivel import views_cross
+
+    centre, up = np.zeros(3), np.array([0.0, 1.0, 0.0])
+
+    def camera(azimuth_deg):
+        azimuth = np.deg2rad(azimuth_deg)
+        eye = 4.0 * np.array([np.cos(azimuth), 0.3, np.sin(azimuth)])
+        return look_at_camera(f"cam{azimuth_deg}", (64, 48), 50.0, eye, centre, up)
+
+    assert not views_cross([camera(0)])
+    assert not views_cross([camera(0), camera(180)])  # facing each other: one line of sight
+    assert not views_cross([camera(0), camera(210)])
+    assert views_cross([camera(0), camera(90)])
+    assert views_cross([camera(0), camera(180), camera(250)])

@@ -25,7 +25,7 @@ from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
 
-__all__ = ["LIMB_ENDS", "SwivelSearch", "swivel_circle"]
+__all__ = ["LIMB_ENDS", "SwivelSearch", "swivel_circle", "views_cross"]
 
 #: Middle joint -> the two limb ends it swivels between.
 LIMB_ENDS: dict[str, tuple[str, str]] = {
@@ -34,6 +34,20 @@ LIMB_ENDS: dict[str, tuple[str, str]] = {
     "LKnee": ("LHip", "LAnkle"),
     "RKnee": ("RHip", "RAnkle"),
 }
+
+
+def views_cross(cameras: Sequence, min_angle_deg: float = 45.0) -> bool:
+    """Whether two of the cameras look across each other (optical axes at least `min_angle_deg`
+    from parallel or antiparallel).
+
+    A swivel moves the middle joint mostly along some direction; views that all look along one
+    line (one camera, or two facing each other) do not see depth along it, and a swivel and its
+    mirror then score almost alike: a global search would trade one for the other at random, so
+    it is worth running only when the views cross.
+    """
+    axes = [np.asarray(camera.rotation)[2] for camera in cameras]
+    limit = np.cos(np.deg2rad(min_angle_deg))
+    return any(abs(float(a @ b)) < limit for index, a in enumerate(axes) for b in axes[index + 1:])
 
 
 def swivel_circle(root: np.ndarray, middle: np.ndarray, end: np.ndarray, count: int) -> np.ndarray:

@@ -25,7 +25,7 @@ from ibik_pin.tasks import FramePositionTask, ImageTask, PostureTask, View
 from ibik_pin.tasks.base import GradientTask
 from ibik_pin.tasks.silhouette_axis import AxisView, SilhouetteAxisTask
 from ibik_pin.tasks.weighted_sum import WeightedSum
-from ibik_pin.tracking.swivel import LIMB_ENDS, SwivelSearch
+from ibik_pin.tracking.swivel import LIMB_ENDS, SwivelSearch, views_cross
 from ibik_pin.vision.medial_axis import medial_axis_pixels
 from ibik_pin.vision.segmentation import TemporalMajority
 from ibik_pin.vision.support import support_from_mask
@@ -58,16 +58,16 @@ class TrackingSettings:
         posture_weight: weight of the posture prior (lowest level).
         mask_filter_radius: with r > 0, each silhouette pixel is the majority over the 2r + 1
             frames around it (images.TemporalMajority), removing one-frame segmentation flicker.
-        criterion: "paper", the overlap of eq. (5)-(6) alone, or "two-way": that overlap plus
+        criterion: "two-way" (default): the overlap of eq. (5)-(6) plus
             `axis_weight` times the silhouette-axis term (tasks.silhouette_axis), which asks the
-            skeleton to explain the silhouette's medial axis as well.
+            skeleton to explain the silhouette's medial axis as well; "paper": the overlap alone.
         axis_weight: weight of the silhouette-axis term in the two-way criterion.
         axis_scale: the axis term's robust scale [m] at the subject's distance: an axis sample
             farther than about this from every projected segment stops pulling.
         swivel_search: after each frame's solve, sample the swivel circle of every elbow and knee
             that is not a target on the image criterion, pull each toward a clearly better sample
             and solve again (tracking.swivel): recovers limbs that fast motion threw into another
-            basin of the criterion.
+            basin of the criterion. Runs only when two views cross (tracking.swivel.views_cross).
     """
 
     method: str = "qp"
@@ -79,10 +79,10 @@ class TrackingSettings:
     image_step: float = 0.05
     posture_weight: float = 1e-2
     mask_filter_radius: int = 0
-    criterion: str = "paper"
+    criterion: str = "two-way"
     axis_weight: float = 1.0
     axis_scale: float = 0.10
-    swivel_search: bool = False
+    swivel_search: bool = True
 
 
 @dataclass
@@ -365,7 +365,7 @@ class Tracker:
             else:
                 solved = self.solver.solve(configuration, levels, iterations=self.settings.iterations)
             result.level_reports.append(solved.levels)
-            if use_image and self.settings.swivel_search:
+            if use_image and self.settings.swivel_search and views_cross(self.cameras):
                 self._follow_swivel_hints(configuration, names, present, levels)
             result.solve_seconds += time.perf_counter() - started
             result.q[frame] = configuration.q
