@@ -125,3 +125,24 @@ def test_values_at_candidates_equal_the_criteria_at_the_configurations(human, rn
         batch = np.stack([c.frame_positions(task.frame_ids) for c in configurations])
         np.testing.assert_allclose(task.values_at(batch), [task.compute_value(c) for c in configurations],
                                    rtol=1e-10, atol=1e-12)
+
+
+def test_values_at_with_the_moved_frames_named_equals_the_full_evaluation(human, rng):
+    silhouette_q = random_human_configuration(human, rng, spread=0.3)
+    axis = SilhouetteAxisTask(human, [view for _, _, view in _axis_views(human, silhouette_q)])
+    positions = np.repeat(Configuration(human.model, silhouette_q).frame_positions(axis.frame_ids)[None], 5, axis=0)
+    row = int(np.flatnonzero(axis.frame_ids == human.frame_id("LElbow"))[0])
+    positions[:, row] += rng.normal(0.0, 0.05, (5, 3))
+    np.testing.assert_allclose(axis.values_at(positions, moved=np.array([row])), axis.values_at(positions),
+                               rtol=1e-12, atol=1e-12)
+
+
+def test_the_image_values_at_with_the_moved_frames_named_equal_the_full_evaluation(human, rng):
+    silhouette_q = random_human_configuration(human, rng, spread=0.3)
+    views = _axis_views(human, silhouette_q)
+    image = ImageTask(human, [View(camera, support_from_mask(mask, inside_cap_px=4.0)) for camera, mask, _ in views])
+    positions = np.repeat(Configuration(human.model, silhouette_q).frame_positions(image.frame_ids)[None], 5, axis=0)
+    row = int(np.flatnonzero(image.frame_ids == human.frame_id("RKnee"))[0])
+    positions[:, row] += rng.normal(0.0, 0.05, (5, 3))
+    np.testing.assert_allclose(image.values_at(positions, moved=np.array([row])), image.values_at(positions),
+                               rtol=1e-12, atol=1e-12)

@@ -149,23 +149,36 @@ class ImageTask(GradientTask):
         """The model frames of the segment ends, in the order `values_at` takes them, shape (K,)."""
         return self._frame_ids
 
-    def values_at(self, frame_positions: np.ndarray) -> np.ndarray:
+    def values_at(self, frame_positions: np.ndarray, moved: np.ndarray | None = None) -> np.ndarray:
         """h for several placements of the segment ends at once (no configuration needed).
 
         Args:
             frame_positions: (C, K, 3) world positions [m] of the frames `frame_ids`, per candidate.
+            moved: rows of `frame_ids` whose positions differ between candidates (None: any may);
+                the samples of the other segments are then read once, not per candidate.
 
         Returns:
             (C,) the criterion of each candidate.
         """
-        points = np.einsum("mk,ckd->cmd", self._interpolation, frame_positions)
-        candidates, samples = points.shape[:2]
+        samples = self._interpolation.shape[0]
+        changing = np.ones(samples, dtype=bool)
+        if moved is not None:
+            changing = np.any(self._interpolation[:, moved] != 0.0, axis=1)
+        candidates = frame_positions.shape[0]
         values = np.zeros(candidates)
         for view in self._active_views:
-            pixels, _, depth = view.camera.project_with_jacobian(points.reshape(-1, 3))
-            support = view.support.sample(pixels).values
-            values += np.where(depth > 1e-6, support, 0.0).reshape(candidates, samples).mean(axis=1)
-        return values / max(len(self._active_views), 1)
+            values += self._support_sum(view, np.einsum("mk,ckd->cmd", self._interpolation[changing], frame_positions))
+            if not changing.all():
+                values += self._support_sum(view, np.einsum("mk,ckd->cmd", self._interpolation[~changing],
+                                                            frame_positions[:1]))
+        return values / (samples * max(len(self._active_views), 1))
+
+    @staticmethod
+    def _support_sum(view: View, points: np.ndarray) -> np.ndarray:
+        """Sum over samples of the support at (C, M, 3) points [m] (0 behind the camera), shape (C,)."""
+        pixels, _, depth = view.camera.project_with_jacobian(points.reshape(-1, 3))
+        support = np.where(depth > 1e-6, view.support.sample(pixels).values, 0.0)
+        return support.reshape(points.shape[:2]).sum(axis=1)
 
     def compute_value(self, configuration: Configuration) -> float:
         return self._evaluate(configuration)[0]

@@ -130,29 +130,33 @@ class SilhouetteAxisTask(GradientTask):
         """The model frames of the segment ends, in the order `values_at` takes them, shape (K,)."""
         return self._frame_ids
 
-    def values_at(self, frame_positions: np.ndarray) -> np.ndarray:
+    def values_at(self, frame_positions: np.ndarray, moved: np.ndarray | None = None) -> np.ndarray:
         """h_axis for several placements of the segment ends at once (no configuration needed).
 
         Args:
             frame_positions: (C, K, 3) world positions [m] of the frames `frame_ids`, per candidate.
+            moved: rows of `frame_ids` whose positions differ between candidates (None: any may);
+                the distances to the other segments are then computed once, not per candidate.
 
         Returns:
             (C,) the criterion of each candidate (views with an end behind the camera skipped).
         """
         candidates, frames = frame_positions.shape[:2]
+        changing = np.ones(len(self.segments), dtype=bool)
+        if moved is not None:
+            changing = np.isin(self._start_index, moved) | np.isin(self._end_index, moved)
         values = np.zeros(candidates)
         counts = np.zeros(candidates)
         for view in self._active_views:
             pixels, _, depth = view.camera.project_with_jacobian(frame_positions.reshape(-1, 3))
             pixels = pixels.reshape(candidates, frames, 2)
             visible = (depth.reshape(candidates, frames) > 1e-6).all(axis=1)
-            starts, ends = pixels[:, self._start_index], pixels[:, self._end_index]  # (C, S, 2)
-            along = ends - starts
-            length_squared = np.maximum(np.einsum("csi,csi->cs", along, along), 1e-12)
-            offsets = view.pixels[None, :, None, :] - starts[:, None, :, :]  # (C, N, S, 2)
-            s = np.clip(np.einsum("cnsi,csi->cns", offsets, along) / length_squared[:, None, :], 0.0, 1.0)
-            residuals = offsets - s[..., None] * along[:, None, :, :]
-            nearest = np.einsum("cnsi,cnsi->cns", residuals, residuals).min(axis=2)  # (C, N)
+            nearest = _nearest_squared(view.pixels, pixels[:, self._start_index[changing]],
+                                       pixels[:, self._end_index[changing]])  # (C, N)
+            if not changing.all():
+                fixed = _nearest_squared(view.pixels, pixels[:1, self._start_index[~changing]],
+                                         pixels[:1, self._end_index[~changing]])
+                nearest = np.minimum(nearest, fixed)
             scale = view.robust_scale_px
             view_values = -0.5 * scale * np.mean(1.0 - np.exp(-nearest / scale**2), axis=1)
             values += np.where(visible, view_values, 0.0)
@@ -197,3 +201,22 @@ def _axis_value_and_pixel_gradient(
     np.add.at(gradient, start_index[nearest], (1.0 - s_near)[:, None] * pull)
     np.add.at(gradient, end_index[nearest], s_near[:, None] * pull)
     return value, gradient
+
+
+def _nearest_squared(samples: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """Squared distance [px^2] of each sample to the nearest of the segments, per candidate.
+
+    Args:
+        samples: (N, 2) [px]; starts, ends: (C, S, 2) segment ends of each candidate [px].
+
+    Returns:
+        (C, N); infinite when S = 0.
+    """
+    if starts.shape[1] == 0:
+        return np.full((starts.shape[0], samples.shape[0]), np.inf)
+    along = ends - starts
+    length_squared = np.maximum(np.einsum("csi,csi->cs", along, along), 1e-12)
+    offsets = samples[None, :, None, :] - starts[:, None, :, :]  # (C, N, S, 2)
+    s = np.clip(np.einsum("cnsi,csi->cns", offsets, along) / length_squared[:, None, :], 0.0, 1.0)
+    residuals = offsets - s[..., None] * along[:, None, :, :]
+    return np.einsum("cnsi,cnsi->cns", residuals, residuals).min(axis=2)

@@ -117,7 +117,7 @@ class SwivelSearch:
                     continue
                 positions = np.repeat(configuration.frame_positions(task.frame_ids)[None], len(candidates), axis=0)
                 positions[:, rows[0]] = candidates
-                values += weight * task.values_at(positions)
+                values += weight * task.values_at(positions, moved=rows)
             best = int(np.argmax(values))
             spread = values.max() - values.min()
             if (spread > 0.0 and values[best] - values[0] > self.min_gain * spread
