@@ -33,7 +33,7 @@ from ibik_pin.limits import JointLimits
 from ibik_pin.model import HUMAN_END_EFFECTORS, load_human
 from ibik_pin.solvers import make_solver
 from ibik_pin.tasks import FramePositionTask, ImageTask, PostureTask, View
-from ibik_pin.vision.camera import look_at_camera
+from ibik_pin.vision.pinhole import look_at_camera
 from ibik_pin.vision.render import render_capsules
 from ibik_pin.vision.support import support_from_mask
 
@@ -91,7 +91,7 @@ def time_pink(body, targets, solver_name: str, steps: int) -> dict | None:
         try:
             velocity = pink.solve_ik(configuration, tasks, dt, solver=solver_name, safety_break=False)
             configuration.integrate_inplace(velocity, dt)
-        except Exception:  # noqa: BLE001 - a failed QP is a measured outcome here
+        except Exception:  # a failed QP is a measured outcome here
             failed += 1
         durations.append(time.perf_counter() - started)
     error = max(np.linalg.norm(configuration.get_transform_frame_to_world(body.keypoints[name]).translation

@@ -8,12 +8,8 @@ import pytest
 
 from ibik_pin.exceptions import FileFormatError, InputError, UnknownNameError
 from ibik_pin.io.calibration import read_calibration, write_calibration
-from ibik_pin.vision.camera import (
-    OrthographicCamera,
-    PinholeCamera,
-    look_at_camera,
-    select_cameras,
-)
+from ibik_pin.vision.camera import OrthographicCamera, select_cameras
+from ibik_pin.vision.pinhole import PinholeCamera, look_at_camera
 from tests.paths import SHARED_DATA
 
 DEMO_CALIBRATION = SHARED_DATA / "pose2sim_demo" / "Calib_qualisys_converted.toml"

@@ -8,7 +8,7 @@ from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
 from ibik_pin.synthetic.planar import make_scene, render_chain
 from ibik_pin.tasks import ImageTask, View
-from ibik_pin.vision.camera import look_at_camera
+from ibik_pin.vision.pinhole import look_at_camera
 from ibik_pin.vision.render import render_capsules
 from ibik_pin.vision.support import SupportImage, support_from_mask
 from tests.conftest import random_human_configuration

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from ibik_pin.exceptions import InputError
-from ibik_pin.vision.camera import OrthographicCamera, look_at_camera
+from ibik_pin.vision.camera import OrthographicCamera
+from ibik_pin.vision.pinhole import look_at_camera
 from ibik_pin.vision.render import render_capsules
 from ibik_pin.viz.drawing import draw_skeleton, overlay_mask
 

@@ -8,8 +8,8 @@ from ibik_pin.exceptions import InputError
 from ibik_pin.tasks import ImageTask, View
 from ibik_pin.tasks.silhouette_axis import AxisView, SilhouetteAxisTask
 from ibik_pin.tracking.swivel import SwivelSearch, swivel_circle
-from ibik_pin.vision.camera import look_at_camera
 from ibik_pin.vision.medial_axis import medial_axis_pixels
+from ibik_pin.vision.pinhole import look_at_camera
 from ibik_pin.vision.render import render_capsules
 from ibik_pin.vision.support import support_from_mask
 

@@ -8,7 +8,7 @@ from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError
 from ibik_pin.synthetic.silhouettes import render_silhouettes
 from ibik_pin.tracking.tracker import Tracker, TrackingSettings
-from ibik_pin.vision.camera import look_at_camera
+from ibik_pin.vision.pinhole import look_at_camera
 from tests.conftest import random_human_configuration
 
 TARGETS = ["Hip", "LHip", "RHip", "LKnee", "RKnee", "LAnkle", "RAnkle", "Neck", "Head",

@@ -17,7 +17,7 @@ import tomli_w
 from ibik_pin.checks import as_finite_array, as_image_size
 from ibik_pin.exceptions import FileFormatError, InputError
 from ibik_pin.io.files import PathLike, write_text_atomically
-from ibik_pin.vision.camera import PinholeCamera
+from ibik_pin.vision.pinhole import PinholeCamera
 
 if sys.version_info >= (3, 11):
     import tomllib

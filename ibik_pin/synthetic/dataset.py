@@ -23,7 +23,7 @@ from ibik_pin.io.trc import TrcData, write_trc
 from ibik_pin.model import BodyModel
 from ibik_pin.synthetic.defects import SilhouetteDefects, apply_defects
 from ibik_pin.synthetic.silhouettes import keypoint_positions, render_limb_masks, render_silhouettes
-from ibik_pin.vision.camera import PinholeCamera
+from ibik_pin.vision.pinhole import PinholeCamera
 
 __all__ = ["DatasetPaths", "write_dataset"]
 

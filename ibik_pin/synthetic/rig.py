@@ -8,7 +8,7 @@ import numpy as np
 
 from ibik_pin.exceptions import InputError
 from ibik_pin.synthetic.mocap import UP
-from ibik_pin.vision.camera import PinholeCamera, look_at_camera
+from ibik_pin.vision.pinhole import PinholeCamera, look_at_camera
 
 __all__ = ["humaneva_rig"]
 

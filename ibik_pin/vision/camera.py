@@ -7,31 +7,25 @@ Conventions (OpenCV's):
   (row i, column j) is at ``u = j, v = i``.
 
 Two camera kinds share the same interface (``project``, ``project_with_jacobian``,
-``pixel_radius``): :class:`PinholeCamera`, the calibrated OpenCV model with distortion, and
-:class:`OrthographicCamera`, for planar virtual experiments.
-
-This module is long because the pinhole model's distortion and its analytic Jacobian are one derivation
-that reads best in one place, beside the orthographic camera that shares its interface.
+``pixel_radius``, :class:`CameraLike`): :class:`~ibik_pin.vision.pinhole.PinholeCamera`, the
+calibrated OpenCV model with distortion (and :func:`~ibik_pin.vision.pinhole.look_at_camera`), in
+:mod:`ibik_pin.vision.pinhole`; and :class:`OrthographicCamera`, for planar virtual experiments,
+here with their common base :class:`Camera` and the helpers that select cameras or move them to
+another frame.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import sys
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import NamedTuple, Protocol, Sequence
+from typing import Any, ClassVar, NamedTuple, Protocol
 
 import cv2
 import numpy as np
 
 from ibik_pin.checks import as_finite_array, as_image_size, as_radii
 from ibik_pin.exceptions import InputError, UnknownNameError
-
-if sys.version_info >= (3, 11):
-    pass
-else:  # pragma: no cover - exercised on Python 3.10 only
-    pass
-
 
 _ROTATION_TOLERANCE = 1e-6
 
@@ -127,6 +121,9 @@ class Camera:
     size: tuple[int, int]
     rotation: np.ndarray
     translation: np.ndarray
+    # Declared, not assigned: every camera kind is a dataclass (dataclasses.replace applies to it,
+    # see cameras_in_frame), and this annotation says so to the type checker.
+    __dataclass_fields__: ClassVar[dict[str, dataclasses.Field[Any]]]
 
     def _validate_placement(self) -> None:
         if not isinstance(self.name, str) or not self.name:
@@ -205,139 +202,6 @@ class Camera:
             & (pixels[:, 1] <= self.height - 1)
         )
 
-@dataclass(frozen=True, eq=False)
-class PinholeCamera(Camera):
-    """A calibrated pinhole camera with OpenCV's distortion model (k1, k2, p1, p2[, k3]).
-
-    With ``(x, y) = (X_cam / Z_cam, Y_cam / Z_cam)``, ``r^2 = x^2 + y^2``:
-    ``x_d = x (1 + k1 r^2 + k2 r^4 + k3 r^6) + 2 p1 x y + p2 (r^2 + 2 x^2)``,
-    ``y_d = y (1 + k1 r^2 + k2 r^4 + k3 r^6) + p1 (r^2 + 2 y^2) + 2 p2 x y``,
-    ``(u, v, 1) = K (x_d, y_d, 1)``; this is ``cv2.projectPoints``. K has zero skew, as in
-    OpenCV's model.
-
-    Attributes:
-        name: camera name (unique within a calibration).
-        size: (width, height) of the image [px].
-        intrinsics: K (3, 3) [px], last row (0, 0, 1).
-        distortion: (4,) or (5,) OpenCV coefficients (k1, k2, p1, p2[, k3]).
-        rotation: R (3, 3), world to camera.
-        translation: t (3,) [m], world to camera.
-    """
-
-    name: str
-    size: tuple[int, int]
-    intrinsics: np.ndarray
-    distortion: np.ndarray
-    rotation: np.ndarray
-    translation: np.ndarray
-
-    def __post_init__(self) -> None:
-        self._validate_placement()
-        K = as_finite_array(self.intrinsics, (3, 3), "intrinsics")
-        if not np.array_equal(K[2], [0.0, 0.0, 1.0]) or K[1, 0] != 0.0 or K[0, 0] <= 0.0 or K[1, 1] <= 0.0:
-            raise InputError(
-                "intrinsics: expected [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, "
-                f"found {K.tolist()}"
-            )
-        if K[0, 1] != 0.0:
-            raise InputError(f"intrinsics: expected zero skew K[0, 1] (OpenCV's model), found {K[0, 1]}")
-        object.__setattr__(self, "intrinsics", _read_only(K))
-        object.__setattr__(self, "distortion", _read_only(as_finite_array(self.distortion, [(4,), (5,)], "distortion")))
-
-    @classmethod
-    def from_rodrigues(
-        cls,
-        name: str,
-        size: tuple[int, int],
-        intrinsics: np.ndarray,
-        distortion: np.ndarray,
-        rvec: np.ndarray,
-        tvec: np.ndarray,
-    ) -> "PinholeCamera":
-        """A camera from OpenCV's extrinsics: ``rvec`` (3,) Rodrigues vector [rad] and ``tvec`` (3,) [m]."""
-        return cls(name, size, intrinsics, distortion, _rotation_from_rodrigues(rvec), tvec)
-
-    @property
-    def focal_px(self) -> float:
-        """Mean of the focal lengths fx and fy [px]."""
-        return 0.5 * (self.intrinsics[0, 0] + self.intrinsics[1, 1])
-
-    def _coefficients(self) -> tuple[float, float, float, float, float]:
-        k1, k2, p1, p2 = self.distortion[:4]
-        k3 = self.distortion[4] if self.distortion.shape[0] == 5 else 0.0
-        return k1, k2, p1, p2, k3
-
-    def _normalized(self, points_world: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Normalised coordinates x = X/Z, y = Y/Z, depth Z [m] and 1/Z of world points (N, 3)."""
-        points_camera = self.points_camera(points_world)
-        depth = points_camera[:, 2]
-        with np.errstate(divide="ignore"):  # a point on the focal plane goes to infinity
-            inverse_depth = 1.0 / depth
-        return points_camera[:, 0] * inverse_depth, points_camera[:, 1] * inverse_depth, depth, inverse_depth
-
-    def project(self, points_world: np.ndarray) -> np.ndarray:
-        """Pixels of world points (N, 3) [m], distortion included: (N, 2) [px].
-
-        Points behind the camera (depth <= 0) get pixels all the same, as in
-        ``cv2.projectPoints``; :meth:`project_with_jacobian` also returns the depth.
-        """
-        x, y, _, _ = self._normalized(points_world)
-        k1, k2, p1, p2, k3 = self._coefficients()
-        r2 = x * x + y * y
-        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        xy = x * y
-        x_distorted = x * radial + 2.0 * p1 * xy + p2 * (r2 + 2.0 * x * x)
-        y_distorted = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * xy
-        K = self.intrinsics
-        return np.stack((K[0, 0] * x_distorted + K[0, 2], K[1, 1] * y_distorted + K[1, 2]), axis=1)
-
-    def project_with_jacobian(self, points_world: np.ndarray) -> Projection:
-        """Pixels of world points with the analytic Jacobian, distortion included.
-
-        The Jacobian is ``diag(fx, fy) . d(x_d, y_d)/d(x, y) . d(x, y)/dX_cam . R``.
-
-        Args:
-            points_world: (N, 3) points in the world frame [m].
-
-        Returns:
-            :class:`Projection` with pixels (N, 2) [px], jacobian (N, 2, 3) [px/m], depth (N,) [m].
-        """
-        x, y, depth, inverse_depth = self._normalized(points_world)
-        k1, k2, p1, p2, k3 = self._coefficients()
-        r2 = x * x + y * y
-        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        radial_slope = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)  # d radial / d r^2
-        xy = x * y
-        x_distorted = x * radial + 2.0 * p1 * xy + p2 * (r2 + 2.0 * x * x)
-        y_distorted = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * xy
-        # d(x_d, y_d) / d(x, y); the two off-diagonal terms are equal.
-        dxd_dx = radial + 2.0 * x * x * radial_slope + 2.0 * p1 * y + 6.0 * p2 * x
-        dyd_dy = radial + 2.0 * y * y * radial_slope + 6.0 * p1 * y + 2.0 * p2 * x
-        cross = 2.0 * xy * radial_slope + 2.0 * p1 * x + 2.0 * p2 * y
-        K = self.intrinsics
-        fx, fy = K[0, 0], K[1, 1]
-        pixels = np.stack((fx * x_distorted + K[0, 2], fy * y_distorted + K[1, 2]), axis=1)
-        # d(u, v) / dX_cam, with d(x, y)/dX_cam = [[1, 0, -x], [0, 1, -y]] / Z.
-        jacobian_camera = np.empty((depth.shape[0], 2, 3))
-        jacobian_camera[:, 0, 0] = fx * dxd_dx * inverse_depth
-        jacobian_camera[:, 0, 1] = fx * cross * inverse_depth
-        jacobian_camera[:, 0, 2] = -fx * (dxd_dx * x + cross * y) * inverse_depth
-        jacobian_camera[:, 1, 0] = fy * cross * inverse_depth
-        jacobian_camera[:, 1, 1] = fy * dyd_dy * inverse_depth
-        jacobian_camera[:, 1, 2] = -fy * (cross * x + dyd_dy * y) * inverse_depth
-        return Projection(pixels, jacobian_camera @ self.rotation, depth)
-
-    def pixel_radius(self, points_world: np.ndarray, radii: np.ndarray) -> np.ndarray:
-        """Image radius ``focal * r / depth`` [px] of spheres (N, 3) [m] of radii (N,) [m].
-
-        Distortion is ignored (a local scale); NaN where the depth is not positive.
-        """
-        depth = self.points_camera(points_world)[:, 2]
-        radii = as_radii(radii, depth.shape[0])
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return np.where(depth > 0.0, self.focal_px * radii / depth, np.nan)
-
-
 
 @dataclass(frozen=True, eq=False)
 class OrthographicCamera(Camera):
@@ -388,51 +252,6 @@ class OrthographicCamera(Camera):
         """Image radius ``scale * r`` [px] of spheres (N, 3) [m] of radii (N,) [m]."""
         count = _as_points(points_world).shape[0]
         return self.scale * as_radii(radii, count)
-
-
-
-def look_at_camera(
-    name: str,
-    size: tuple[int, int],
-    focal_px: float,
-    eye: np.ndarray,
-    target: np.ndarray,
-    up: np.ndarray,
-) -> PinholeCamera:
-    """A distortion-free pinhole camera at ``eye`` looking at ``target``.
-
-    The principal point is the image centre ((width - 1) / 2, (height - 1) / 2); image rows go
-    down, against ``up``.
-
-    Args:
-        name: camera name.
-        size: (width, height) [px].
-        focal_px: focal length [px].
-        eye: (3,) camera centre in the world [m].
-        target: (3,) world point seen at the image centre [m].
-        up: (3,) world direction that appears upward in the image.
-
-    Returns:
-        The camera.
-    """
-    width, height = as_image_size(size)
-    focal = float(as_finite_array(focal_px, (), "focal_px"))
-    if focal <= 0.0:
-        raise InputError(f"focal_px: expected a positive focal length [px], found {focal}")
-    eye = as_finite_array(eye, (3,), "eye")
-    forward = as_finite_array(target, (3,), "target") - eye
-    if np.linalg.norm(forward) == 0.0:
-        raise InputError(f"target: expected a point different from eye, found {forward + eye} for both")
-    forward /= np.linalg.norm(forward)
-    right = np.cross(forward, as_finite_array(up, (3,), "up"))
-    if np.linalg.norm(right) < 1e-9:
-        raise InputError(f"up: expected a direction not parallel to the viewing direction {forward}, found {up}")
-    right /= np.linalg.norm(right)
-    down = np.cross(forward, right)
-    rotation = np.stack((right, down, forward))
-    intrinsics = np.array([[focal, 0.0, 0.5 * (width - 1)], [0.0, focal, 0.5 * (height - 1)], [0.0, 0.0, 1.0]])
-    return PinholeCamera(name, (width, height), intrinsics, np.zeros(5), rotation, -rotation @ eye)
-
 
 
 def select_cameras(cameras: Sequence[Camera], names: Sequence[str]) -> list[Camera]:

@@ -69,7 +69,7 @@ def render_capsules(
     the camera cannot see (behind a pinhole camera) are skipped, not clipped.
 
     Args:
-        camera: a :class:`~ibik_pin.vision.camera.PinholeCamera` or
+        camera: a :class:`~ibik_pin.vision.pinhole.PinholeCamera` or
             :class:`~ibik_pin.vision.camera.OrthographicCamera`.
         starts_world: (S, 3) first end of each capsule's axis [m].
         ends_world: (S, 3) second end [m].

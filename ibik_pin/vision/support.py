@@ -95,7 +95,7 @@ class SupportImage:
         """(width, height) [px]."""
         return self.values.shape[1], self.values.shape[0]
 
-    def __add__(self, other: "SupportImage") -> "SupportImage":
+    def __add__(self, other: SupportImage) -> SupportImage:
         """Pixel-wise sum, e.g. a silhouette support plus an :func:`obstacle_support`.
 
         The sum is enabled only if both terms are: a view disabled for an empty silhouette
