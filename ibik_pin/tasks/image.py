@@ -23,7 +23,7 @@ import numpy as np
 from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
 from ibik_pin.model import BodyModel
-from ibik_pin.tasks.base import GradientTask
+from ibik_pin.tasks.segments import SegmentCriterion, segment_ends
 from ibik_pin.vision.camera import CameraLike
 from ibik_pin.vision.support import SupportImageLike
 
@@ -55,7 +55,7 @@ class View:
             )
 
 
-class ImageTask(GradientTask):
+class ImageTask(SegmentCriterion):
     """Maximise the overlap h(q) of the projected skeleton segments with the views' supports.
 
     Attributes:
@@ -79,22 +79,15 @@ class ImageTask(GradientTask):
             raise InputError(f"samples_per_segment must be >= 1, got {samples_per_segment}")
         self.body = body
         self.samples_per_segment = int(samples_per_segment)
-        segments = list(body.segments if segments is None else segments)
-        if not segments:
-            raise InputError("the image task needs at least one segment")
-        segment_frames = np.array(
-            [[body.frame_id(a), body.frame_id(b)] for a, b in segments], dtype=int
-        )
         # Unique end frames, so each Jacobian is fetched once even when segments share a joint.
-        self._frame_ids, inverse = np.unique(segment_frames, return_inverse=True)
-        inverse = inverse.reshape(-1, 2)
+        segments, self._frame_ids, starts, ends = segment_ends(body, segments, "the image task")
         n = self.samples_per_segment
         s = (np.arange(n) + 0.5) / n
         # Sample m = segment * n + i is interpolation_weights[m] @ positions of the unique frames.
         weights = np.zeros((len(segments) * n, len(self._frame_ids)))
         rows = np.arange(len(segments) * n)
-        np.add.at(weights, (rows, np.repeat(inverse[:, 0], n)), np.tile(1.0 - s, len(segments)))
-        np.add.at(weights, (rows, np.repeat(inverse[:, 1], n)), np.tile(s, len(segments)))
+        np.add.at(weights, (rows, np.repeat(starts, n)), np.tile(1.0 - s, len(segments)))
+        np.add.at(weights, (rows, np.repeat(ends, n)), np.tile(s, len(segments)))
         self._interpolation = weights
         self.segments = segments
         self.views: list[View] = []
@@ -144,21 +137,10 @@ class ImageTask(GradientTask):
         self._cache_version = configuration.version
         return self._cache
 
-    @property
-    def frame_ids(self) -> np.ndarray:
-        """The model frames of the segment ends, in the order `values_at` takes them, shape (K,)."""
-        return self._frame_ids
-
     def values_at(self, frame_positions: np.ndarray, moved: np.ndarray | None = None) -> np.ndarray:
-        """h for several placements of the segment ends at once (no configuration needed).
+        """h for (C, K, 3) placements of the segment ends, shape (C,) (see SegmentCriterion.values_at).
 
-        Args:
-            frame_positions: (C, K, 3) world positions [m] of the frames `frame_ids`, per candidate.
-            moved: rows of `frame_ids` whose positions differ between candidates (None: any may);
-                the samples of the other segments are then read once, not per candidate.
-
-        Returns:
-            (C,) the criterion of each candidate.
+        The samples of the segments that no `moved` row ends are read once, not per candidate.
         """
         samples = self._interpolation.shape[0]
         changing = np.ones(samples, dtype=bool)

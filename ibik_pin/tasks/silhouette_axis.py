@@ -25,15 +25,16 @@ translation Jacobians of the segment's end frames and dpi/dX the projection Jaco
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
 from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
-from ibik_pin.tasks.base import GradientTask
+from ibik_pin.tasks.segments import SegmentCriterion, segment_ends
+from ibik_pin.vision.camera import CameraLike
 
 __all__ = ["AxisView", "SilhouetteAxisTask"]
 
@@ -43,13 +44,13 @@ class AxisView:
     """One camera and the medial-axis samples of its silhouette.
 
     Attributes:
-        camera: a camera with ``project_with_jacobian(points_world (K, 3))`` returning pixels
-            (K, 2), d pixels / d X_world (K, 2, 3) and depth (K,).
+        camera: the camera (vision.camera.CameraLike); its ``project_with_jacobian(points_world
+            (K, 3))`` gives pixels (K, 2), d pixels / d X_world (K, 2, 3) and depth (K,).
         pixels: (N, 2) medial-axis samples (u, v) [px]; N = 0 disables the view.
         robust_scale_px: c, the distance [px] beyond which a sample stops pulling.
     """
 
-    camera: object
+    camera: CameraLike
     pixels: np.ndarray
     robust_scale_px: float
 
@@ -61,7 +62,7 @@ class AxisView:
             raise InputError(f"robust_scale_px: expected a positive distance [px], found {self.robust_scale_px}")
 
 
-class SilhouetteAxisTask(GradientTask):
+class SilhouetteAxisTask(SegmentCriterion):
     """Maximise h_axis: every medial-axis sample of every view near some projected segment.
 
     Attributes:
@@ -80,14 +81,10 @@ class SilhouetteAxisTask(GradientTask):
     ) -> None:
         super().__init__(max_step_size, min_step_size)
         self.body = body
-        self.segments = list(body.segments if segments is None else segments)
-        if not self.segments:
-            raise InputError("the silhouette-axis task needs at least one segment")
-        segment_frames = np.array([[body.frame_id(a), body.frame_id(b)] for a, b in self.segments], dtype=int)
         # Unique end frames: each projection and Jacobian is computed once per step.
-        self._frame_ids, inverse = np.unique(segment_frames, return_inverse=True)
-        inverse = inverse.reshape(-1, 2)
-        self._start_index, self._end_index = inverse[:, 0], inverse[:, 1]
+        self.segments, self._frame_ids, self._start_index, self._end_index = segment_ends(
+            body, segments, "the silhouette-axis task"
+        )
         self.views: list[AxisView] = []
         self.set_views(views)
 
@@ -125,21 +122,11 @@ class SilhouetteAxisTask(GradientTask):
         self._cache_version = configuration.version
         return self._cache
 
-    @property
-    def frame_ids(self) -> np.ndarray:
-        """The model frames of the segment ends, in the order `values_at` takes them, shape (K,)."""
-        return self._frame_ids
-
     def values_at(self, frame_positions: np.ndarray, moved: np.ndarray | None = None) -> np.ndarray:
-        """h_axis for several placements of the segment ends at once (no configuration needed).
+        """h_axis for (C, K, 3) placements of the segment ends, shape (C,) (see SegmentCriterion.values_at).
 
-        Args:
-            frame_positions: (C, K, 3) world positions [m] of the frames `frame_ids`, per candidate.
-            moved: rows of `frame_ids` whose positions differ between candidates (None: any may);
-                the distances to the other segments are then computed once, not per candidate.
-
-        Returns:
-            (C,) the criterion of each candidate (views with an end behind the camera skipped).
+        The distances to the segments that no `moved` row ends are computed once, not per
+        candidate; a view with an end behind the camera is skipped for that candidate.
         """
         candidates, frames = frame_positions.shape[:2]
         changing = np.ones(len(self.segments), dtype=bool)

@@ -6,7 +6,7 @@ paper's overlap and the silhouette-axis term together, each with its weight.
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -49,11 +49,11 @@ class WeightedSum(GradientTask):
 
     def compute_value(self, configuration: Configuration) -> float:
         return float(sum(weight * term.compute_value(configuration)
-                         for term, weight in zip(self.terms, self.weights) if term.enabled))
+                         for term, weight in zip(self.terms, self.weights, strict=True) if term.enabled))
 
     def compute_gradient(self, configuration: Configuration) -> np.ndarray:
         gradient = np.zeros(configuration.model.nv)
-        for term, weight in zip(self.terms, self.weights):
+        for term, weight in zip(self.terms, self.weights, strict=True):
             if term.enabled and weight > 0.0:
                 gradient += weight * term.compute_gradient(configuration)
         return gradient

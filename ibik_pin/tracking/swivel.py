@@ -16,14 +16,15 @@ level refine.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
 from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
+from ibik_pin.tasks.segments import SegmentCriterion
 
 __all__ = ["LIMB_ENDS", "SwivelSearch", "swivel_circle", "views_cross"]
 
@@ -81,7 +82,8 @@ class SwivelSearch:
 
     Attributes:
         body: the body model.
-        terms: (task, weight) pairs; each task has `frame_ids` and `values_at(positions (C, K, 3))`.
+        terms: (task, weight) pairs; each task reads the segment ends `frame_ids` and gives
+            `values_at(positions (C, K, 3))` (tasks.segments.SegmentCriterion).
         samples: points on each circle.
         min_gain: a hint needs a criterion this much above the current pose's, as a fraction of
             the criterion's range over the circle (a flat circle gives no hint).
@@ -89,7 +91,7 @@ class SwivelSearch:
     """
 
     body: BodyModel
-    terms: Sequence[tuple[object, float]]
+    terms: Sequence[tuple[SegmentCriterion, float]]
     samples: int = 36
     min_gain: float = 0.02
     min_distance: float = 0.02

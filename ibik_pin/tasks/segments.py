@@ -1,0 +1,85 @@
+"""Criteria read along the skeleton's segments, and the unique end frames those segments share.
+
+The image overlap (:mod:`ibik_pin.tasks.image`) and the silhouette-axis term
+(:mod:`ibik_pin.tasks.silhouette_axis`) both lie on segments between two keypoints. They set up
+the segments' end frames alike (each frame once, so that each position and Jacobian is computed
+once per step even where segments share a joint), and the swivel search
+(:mod:`ibik_pin.tracking.swivel`) evaluates both for many placements of those frames at once.
+"""
+
+from __future__ import annotations
+
+from abc import abstractmethod
+from collections.abc import Sequence
+from typing import NamedTuple
+
+import numpy as np
+
+from ibik_pin.exceptions import InputError
+from ibik_pin.model import BodyModel
+from ibik_pin.tasks.base import GradientTask
+
+__all__ = ["SegmentCriterion", "SegmentEnds", "segment_ends"]
+
+
+class SegmentEnds(NamedTuple):
+    """The segments of a criterion and their unique end frames.
+
+    Attributes:
+        segments: the S keypoint pairs.
+        frame_ids: (K,) the model frames of the segment ends, each once (sorted).
+        start_index: (S,) row of `frame_ids` of each segment's first end.
+        end_index: (S,) row of `frame_ids` of each segment's second end.
+    """
+
+    segments: list[tuple[str, str]]
+    frame_ids: np.ndarray
+    start_index: np.ndarray
+    end_index: np.ndarray
+
+
+def segment_ends(body: BodyModel, segments: Sequence[tuple[str, str]] | None, task_name: str) -> SegmentEnds:
+    """The segments (the body's when None) and their unique end frames.
+
+    Args:
+        body: the body model whose keypoints name the segment ends.
+        segments: keypoint pairs, or None for ``body.segments``.
+        task_name: names the task in the error message, e.g. "the image task".
+
+    Raises:
+        InputError: there is no segment.
+    """
+    segments = list(body.segments if segments is None else segments)
+    if not segments:
+        raise InputError(f"{task_name} needs at least one segment")
+    segment_frames = np.array([[body.frame_id(a), body.frame_id(b)] for a, b in segments], dtype=int)
+    frame_ids, inverse = np.unique(segment_frames, return_inverse=True)
+    inverse = inverse.reshape(-1, 2)
+    return SegmentEnds(segments, frame_ids, inverse[:, 0], inverse[:, 1])
+
+
+class SegmentCriterion(GradientTask):
+    """A gradient task that depends on the configuration only through its segments' end frames.
+
+    Subclasses set ``_frame_ids`` (see :func:`segment_ends`) and implement :meth:`values_at`.
+    """
+
+    _frame_ids: np.ndarray
+
+    @property
+    def frame_ids(self) -> np.ndarray:
+        """The model frames of the segment ends, in the order `values_at` takes them, shape (K,)."""
+        return self._frame_ids
+
+    @abstractmethod
+    def values_at(self, frame_positions: np.ndarray, moved: np.ndarray | None = None) -> np.ndarray:
+        """The criterion for several placements of the segment ends at once (no configuration needed).
+
+        Args:
+            frame_positions: (C, K, 3) world positions [m] of the frames `frame_ids`, per candidate.
+            moved: rows of `frame_ids` whose positions differ between candidates (None: any may);
+                what depends only on the other rows is then computed once, not per candidate.
+
+        Returns:
+            (C,) the criterion of each candidate.
+        """
