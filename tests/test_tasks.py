@@ -78,3 +78,37 @@ def test_a_none_target_disables_the_task(human):
 def test_a_gain_outside_0_1_is_refused(human, gain):
     with pytest.raises(InputError, match="gain"):
         FramePositionTask(human.model, "LWrist", gain=gain)
+
+
+def test_a_position_task_driven_by_some_joints_moves_only_those(human):
+    import pinocchio as pin
+
+    from ibik_pin.configuration import Configuration
+    from ibik_pin.tasks import FramePositionTask
+
+    model = human.model
+    driven = np.zeros(model.nv, dtype=bool)
+    joint = model.joints[model.getJointId("left_ankle_Z")]
+    driven[joint.idx_v:joint.idx_v + joint.nv] = True
+    task = FramePositionTask(model, human.keypoints["LBigToe"], np.zeros(3), driven=driven)
+    full = FramePositionTask(model, human.keypoints["LBigToe"], np.zeros(3))
+    configuration = Configuration(model, pin.neutral(model))
+    jacobian = task.compute_jacobian(configuration)
+    np.testing.assert_array_equal(jacobian[:, ~driven], 0.0)
+    np.testing.assert_array_equal(jacobian[:, driven], full.compute_jacobian(configuration)[:, driven])
+    with pytest.raises(InputError, match="driven"):
+        FramePositionTask(model, human.keypoints["LBigToe"], driven=np.ones(3, dtype=bool))
+
+
+def test_the_tracker_drives_toes_and_heels_by_the_joints_that_do_not_move_the_ankle(human):
+    from ibik_pin.tracking.tracker import Tracker
+
+    tracker = Tracker(human)
+    model = human.model
+    for point, side in [("LBigToe", "left"), ("RHeel", "right")]:
+        driven = tracker._foot_point_joints(point)
+        names = {model.names[j] for j in range(1, model.njoints)
+                 if driven[model.joints[j].idx_v:model.joints[j].idx_v + model.joints[j].nv].any()}
+        # The ankle's two and the hip's axial rotation, which turns a straight leg's foot.
+        assert names == {f"{side}_ankle_Z", f"{side}_ankle_X", f"{side}_hip_Y"}
+    assert tracker._foot_point_joints("LWrist") is None

@@ -17,6 +17,8 @@ class FramePositionTask(Task):
     Attributes:
         frame_name: the model frame.
         target: world target [m], shape (3,), or None (task disabled, e.g. occluded this frame).
+        driven: (nv,) bool, the velocity coordinates allowed to move toward the target (the
+            Jacobian's other columns are zero), or None for all of them.
     """
 
     def __init__(
@@ -26,10 +28,16 @@ class FramePositionTask(Task):
         target: np.ndarray | None = None,
         gain: float = 1.0,
         weight: float = 1.0,
+        driven: np.ndarray | None = None,
     ) -> None:
         super().__init__(gain, weight)
         self.frame_name = frame_name
         self.frame_id = frame_id(model, frame_name)
+        self.driven = None
+        if driven is not None:
+            self.driven = np.asarray(driven, dtype=bool)
+            if self.driven.shape != (model.nv,):
+                raise InputError(f"driven: expected a bool mask of shape ({model.nv},), got {self.driven.shape}")
         self.set_target(target)
 
     def set_target(self, target: np.ndarray | None) -> None:
@@ -54,4 +62,7 @@ class FramePositionTask(Task):
         return configuration.frame_position(self.frame_id) - self.target
 
     def compute_jacobian(self, configuration: Configuration) -> np.ndarray:
-        return configuration.frame_translation_jacobian(self.frame_id)
+        jacobian = configuration.frame_translation_jacobian(self.frame_id)
+        if self.driven is None:
+            return jacobian
+        return np.where(self.driven, jacobian, 0.0)
