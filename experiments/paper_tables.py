@@ -191,8 +191,8 @@ def main() -> None:
             columns.append(f"{kind} ({joint}, {len(per_clip)} clips)")
             for label in rows:
                 rows[label].append(float(np.mean([clip[label] for clip in per_clip.values()])))
-        sections += [markdown_table(f"Table 1 analogue, {condition} silhouettes"
-                                    + (f" (+{DEFECT_TARGET_NOISE_MM:.0f} mm target noise)" if condition == "defects" else ""), columns, rows), ""]
+        noise = f" (+{DEFECT_TARGET_NOISE_MM:.0f} mm target noise)" if condition == "defects" else ""
+        sections += [markdown_table(f"Table 1 analogue, {condition} silhouettes" + noise, columns, rows), ""]
     for condition in CONDITIONS:
         for clip_name, per_method in results["table2"][condition].items():
             columns = list(next(iter(per_method.values())))

@@ -143,7 +143,7 @@ def render_views(clip: Clip, count: int, defects: SilhouetteDefects | None = Non
         frame_masks = render_silhouettes(clip.body, q, cameras)
         if defects is not None:
             frame_masks = [apply_defects(mask, defects, rng, render_limb_masks(clip.body, q, camera))
-                           for mask, camera in zip(frame_masks, cameras)]
+                           for mask, camera in zip(frame_masks, cameras, strict=True)]
         masks.append(frame_masks)
     return Views(cameras, masks)
 

@@ -45,7 +45,7 @@ def boxing():
     return prepare_clip("boxing", motion, "boxing", slice(0, 120, 2))
 
 
-@pytest.mark.parametrize("chain, clip_name", [("leg", "walking"), ("arm", "boxing")])
+@pytest.mark.parametrize(("chain", "clip_name"), [("leg", "walking"), ("arm", "boxing")])
 def test_ibik_with_two_views_halves_pik_error_and_stays_under_25_mm(chain, clip_name, request):
     clip = request.getfixturevalue(clip_name)
     views = subset_views(render_views(clip, 4, seed=1), 2)
@@ -55,7 +55,7 @@ def test_ibik_with_two_views_halves_pik_error_and_stays_under_25_mm(chain, clip_
     assert ibik.mean_error_mm <= 25.0
 
 
-@pytest.mark.parametrize("chain, clip_name", [("leg", "walking"), ("arm", "boxing")])
+@pytest.mark.parametrize(("chain", "clip_name"), [("leg", "walking"), ("arm", "boxing")])
 def test_ibik_with_two_views_still_halves_pik_error_with_defective_silhouettes(chain, clip_name, request):
     """Erosion, dilation, holes, blobs, lost limbs (seeded) and 5 mm target noise for both."""
     clip = request.getfixturevalue(clip_name)
