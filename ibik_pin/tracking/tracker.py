@@ -10,32 +10,30 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
 
 import numpy as np
-import pinocchio as pin
 
 from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
 from ibik_pin.limits import JointLimits
 from ibik_pin.model import BodyModel
 from ibik_pin.solvers import LevelReport, SolveResult, make_solver
-from ibik_pin.tasks import FramePositionTask, ImageTask, PostureTask, View
-from ibik_pin.tasks.base import GradientTask
-from ibik_pin.tasks.silhouette_axis import AxisView, SilhouetteAxisTask
+from ibik_pin.tasks import FramePositionTask, ImageTask, PostureTask
+from ibik_pin.tasks.base import GradientTask, Task
+from ibik_pin.tasks.segments import SegmentCriterion
+from ibik_pin.tasks.silhouette_axis import SilhouetteAxisTask
 from ibik_pin.tasks.weighted_sum import WeightedSum
 from ibik_pin.tracking.swivel import LIMB_ENDS, SwivelSearch, views_cross
-from ibik_pin.vision.medial_axis import medial_axis_pixels
+from ibik_pin.tracking.views import axis_views, initial_configuration, make_views, support_caps
 from ibik_pin.vision.segmentation import TemporalMajority
-from ibik_pin.vision.support import support_from_mask
 
 LOWER_BODY = {"Hip", "LHip", "RHip", "LKnee", "RKnee", "LAnkle", "RAnkle", "LBigToe", "LSmallToe",
               "LHeel", "RBigToe", "RSmallToe", "RHeel"}
 CRITERIA = ("paper", "two-way")
 # Foot points and the ankle each belongs to (see Tracker._foot_point_joints).
 FOOT_POINT_ANKLES = {f"{side}{point}": f"{side}Ankle" for side in "LR" for point in ("BigToe", "SmallToe", "Heel")}
-LIMB_HALF_WIDTH = 0.04  # [m] the support's inside cap, in pixels at the subject's distance (docs/method.md)
 
 # A frame's silhouettes: one (H, W) bool mask per camera, in the cameras' order.
 SilhouetteSource = Callable[[int], Sequence[np.ndarray]]
@@ -131,67 +129,6 @@ class TrackingResult:
         return len(self.q) / self.solve_seconds if self.solve_seconds > 0 else float("nan")
 
 
-def initial_configuration(body: BodyModel, names: list[str], targets: np.ndarray) -> np.ndarray:
-    """The neutral pose placed on the pelvis target and turned to face where the hips say.
-
-    Args:
-        names: target names; targets: (K, 3) [m] in the model's frame (Y up), NaN where absent.
-    """
-    q = pin.neutral(body.model)
-    present = {name: targets[k] for k, name in enumerate(names) if np.all(np.isfinite(targets[k]))}
-    if "Hip" in present:
-        q[:3] = present["Hip"]
-    elif "LHip" in present and "RHip" in present:
-        q[:3] = 0.5 * (present["LHip"] + present["RHip"])
-    elif present:
-        q[:3] = np.mean(list(present.values()), axis=0)
-    if "LHip" in present and "RHip" in present:
-        right = present["RHip"] - present["LHip"]  # the model's +Z points to its right
-        right[1] = 0.0
-        if np.linalg.norm(right) > 1e-6:
-            z_axis = right / np.linalg.norm(right)
-            y_axis = np.array([0.0, 1.0, 0.0])
-            rotation = np.column_stack([np.cross(y_axis, z_axis), y_axis, z_axis])
-            q[3:7] = pin.Quaternion(rotation).coeffs()
-    return q
-
-
-def support_caps(cameras: Sequence, subject_position: np.ndarray, size: float = LIMB_HALF_WIDTH) -> list[float]:
-    """Inside cap [px] of each view's support: a limb's half width (or `size` [m]) seen at the
-    subject's distance, at least 1 px."""
-    caps = []
-    for camera in cameras:
-        radius = camera.pixel_radius(subject_position[None], np.array([size]))
-        caps.append(float(max(radius[0], 1.0)))
-    return caps
-
-
-def make_views(
-    cameras: Sequence, masks: Sequence[np.ndarray], caps: Sequence[float]
-) -> tuple[list[View], list[str]]:
-    """One view per camera from its silhouette; also the names of the cameras whose mask is empty.
-
-    Args:
-        masks: (H, W) bool silhouette per camera; caps: the support's inside cap per camera [px].
-    """
-    if len(masks) != len(cameras):
-        raise InputError(f"expected one silhouette per camera ({len(cameras)}), got {len(masks)}")
-    views, disabled = [], []
-    for camera, mask, cap in zip(cameras, masks, caps):
-        with warnings.catch_warnings():  # empty views are reported per frame instead
-            warnings.simplefilter("ignore", EmptySilhouetteWarning)
-            support = support_from_mask(mask, inside_cap_px=cap)
-        if not support.enabled:
-            disabled.append(camera.name)
-        views.append(View(camera, support))
-    return views, disabled
-
-
-def axis_views(cameras: Sequence, masks: Sequence[np.ndarray], scales: Sequence[float]) -> list[AxisView]:
-    """One silhouette-axis view per camera: the medial axis of its mask, robust scale [px]."""
-    return [AxisView(camera, medial_axis_pixels(mask), scale) for camera, mask, scale in zip(cameras, masks, scales)]
-
-
 def solve_first_frame(
     solver,
     configuration: Configuration,
@@ -256,7 +193,7 @@ class Tracker:
                                                max_step_size=self.settings.image_step)
         self._target_tasks: dict[str, FramePositionTask] = {}
         self._hint_tasks: dict[str, FramePositionTask] = {}
-        terms = [(self.image_task, 1.0)]
+        terms: list[tuple[SegmentCriterion, float]] = [(self.image_task, 1.0)]
         if self.settings.criterion == "two-way":
             terms.append((self.axis_task, self.settings.axis_weight))
         self.swivel = SwivelSearch(body, terms)
@@ -264,7 +201,7 @@ class Tracker:
     def _follow_swivel_hints(self, configuration: Configuration, names: list[str], present: np.ndarray,
                              levels: list[list]) -> None:
         """Pull the free elbows and knees to their swivel hints, then solve every level again."""
-        targeted = {name for name, here in zip(names, present) if here}
+        targeted = {name for name, here in zip(names, present, strict=True) if here}
         free = [name for name in LIMB_ENDS if name not in targeted]
         hints = self.swivel.hints(configuration, free)
         if not hints:
@@ -286,8 +223,8 @@ class Tracker:
             if name not in self._target_tasks:
                 self._target_tasks[name] = FramePositionTask(self.body.model, self.body.keypoints[name],
                                                              driven=self._foot_point_joints(name))
-        lower = [self._target_tasks[n] for n in names if n in LOWER_BODY]
-        upper = [self._target_tasks[n] for n in names if n not in LOWER_BODY]
+        lower: list[Task | GradientTask] = [self._target_tasks[n] for n in names if n in LOWER_BODY]
+        upper: list[Task | GradientTask] = [self._target_tasks[n] for n in names if n not in LOWER_BODY]
         levels = [lower, upper]
         if self.settings.use_image and self.cameras:
             levels.append([self.image_criterion])
@@ -345,11 +282,15 @@ class Tracker:
         if targets.ndim != 3 or targets.shape[1:] != (len(names), 3):
             raise InputError(f"targets must have shape (F, {len(names)}, 3), got {targets.shape}")
         use_image = self.settings.use_image and bool(self.cameras)
-        if use_image and silhouettes is None:
-            raise InputError("the image criterion needs silhouettes: give masks or videos, or --no-image")
         frame_count = targets.shape[0]
-        if use_image and self.settings.mask_filter_radius > 0:
-            silhouettes = TemporalMajority(silhouettes, frame_count, self.settings.mask_filter_radius)
+        # The silhouettes the image level reads (temporally filtered if asked); None without the image.
+        source: SilhouetteSource | None = None
+        if use_image:
+            if silhouettes is None:
+                raise InputError("the image criterion needs silhouettes: give masks or videos, or --no-image")
+            source = silhouettes
+            if self.settings.mask_filter_radius > 0:
+                source = TemporalMajority(silhouettes, frame_count, self.settings.mask_filter_radius)
         levels = self._levels(names)
         keypoint_names = list(self.body.keypoints)
         keypoint_ids = self.body.frame_ids(keypoint_names)
@@ -370,10 +311,10 @@ class Tracker:
             present = np.all(np.isfinite(targets[frame]), axis=1)
             for k, name in enumerate(names):
                 self._target_tasks[name].set_target(targets[frame, k] if present[k] else None)
-            result.dropped_targets.append([n for n, p in zip(names, present) if not p])
-            disabled = []
-            if use_image:
-                masks = silhouettes(frame)
+            result.dropped_targets.append([n for n, p in zip(names, present, strict=True) if not p])
+            disabled: list[str] = []
+            if source is not None:  # the image is used
+                masks = source(frame)
                 views, disabled = make_views(self.cameras, masks, caps)
                 with warnings.catch_warnings():  # empty views are reported per frame instead
                     warnings.simplefilter("ignore", EmptySilhouetteWarning)
