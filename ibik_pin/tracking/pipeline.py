@@ -12,9 +12,9 @@ import shutil
 import sys
 import tempfile
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 from tqdm import tqdm
@@ -91,6 +91,8 @@ class Silhouettes:
         """Frame `index`'s (H, W) bool silhouette in camera number `camera`."""
         if self.mask_files is not None:
             return read_mask(self.mask_files[camera][index], self.sizes[camera])
+        if self.video_masks is None:
+            raise InputError("silhouettes: neither mask files nor video masks were loaded")
         return self.video_masks[camera][index]
 
     def frame(self, index: int) -> list[np.ndarray]:
@@ -149,12 +151,14 @@ def load_silhouettes(job: TrackJob, cameras: list, frame_count: int, progress: b
     if job.masks is not None:
         folders = _camera_folder_entries(job.masks, names, "masks")
         files = [list_mask_files(folders[name]) for name in names]
-        for name, listed, size in zip(names, files, sizes):
+        for name, listed, size in zip(names, files, sizes, strict=True):
             if len(listed) != frame_count:
                 raise InputError(f"--masks {folders[name]}: {len(listed)} masks for camera {name!r} "
                                  f"but the targets have {frame_count} frames")
             read_mask(listed[0], size)  # size and readability, before any solving
         return Silhouettes(files, None, sizes)
+    if job.videos is None:
+        raise InputError("the image criterion needs --masks or --videos (or pass --no-image)")
     videos = _camera_folder_entries(job.videos, names, "videos")
     backgrounds: dict[str, list[Path]] = {name: [] for name in names}
     if job.background is not None:
@@ -168,10 +172,10 @@ def load_silhouettes(job: TrackJob, cameras: list, frame_count: int, progress: b
     masks = []
     # disable=None draws the bar only when stderr is a terminal, so logs and pipes stay clean.
     with tqdm(total=len(names), desc="silhouettes", unit="camera", disable=None if progress else True) as bar:
-        for name, size in zip(names, sizes):
+        for name, size in zip(names, sizes, strict=True):
             with VideoReader(videos[name]) as reader:
                 video_size = tuple(reader.size)
-            if any(abs(a - b) >= CODEC_ALIGNMENT_PX for a, b in zip(video_size, size)):
+            if any(abs(a - b) >= CODEC_ALIGNMENT_PX for a, b in zip(video_size, size, strict=True)):
                 raise InputError(f"--videos {videos[name]}: frames are {video_size[0]} x "
                                  f"{video_size[1]} px but camera {name!r} is {size[0]} x {size[1]} px")
             camera_masks = silhouettes_from_video(videos[name], backgrounds[name] or None)
