@@ -68,6 +68,9 @@ class TrackingSettings:
             that is not a target on the image criterion, pull each toward a clearly better sample
             and solve again (tracking.swivel): recovers limbs that fast motion threw into another
             basin of the criterion. Runs only when two views cross (tracking.swivel.views_cross).
+        feet_by_ankle: toe and heel targets move only the joints that do not move their ankle
+            (Tracker._foot_point_joints); False lets them move the whole leg, as a plain
+            end-effector target does.
     """
 
     method: str = "qp"
@@ -83,6 +86,7 @@ class TrackingSettings:
     axis_weight: float = 1.0
     axis_scale: float = 0.10
     swivel_search: bool = True
+    feet_by_ankle: bool = True
 
 
 @dataclass
@@ -245,7 +249,7 @@ class Tracker:
         whole leg, 10.7 mm driven this way.
         """
         ankle = FOOT_POINT_ANKLES.get(name)
-        if ankle is None or ankle not in self.body.keypoints:
+        if not self.settings.feet_by_ankle or ankle is None or ankle not in self.body.keypoints:
             return None
         configuration = Configuration(self.body.model)
         moves = np.linalg.norm(configuration.frame_translation_jacobian(self.body.frame_id(name)), axis=0) > 1e-9
