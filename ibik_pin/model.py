@@ -239,25 +239,24 @@ def load_planar_chain() -> BodyModel:
 
 def load_arm() -> BodyModel:
     """The paper's 3D arm: shoulder and elbow of 3 DOF each, end effector at the wrist."""
-    model = load_urdf(_project_model("arm.urdf"))
-    return BodyModel(
-        model=model,
-        keypoints={"Shoulder": "shoulder_Z", "Elbow": "elbow_Z", "Wrist": "wrist"},
-        segments=[("Shoulder", "Elbow"), ("Elbow", "Wrist")],
-        segment_radii=np.array([0.045, 0.035]),
-        end_effectors=["Wrist"],
-    )
+    return _paper_chain("arm.urdf", [("Shoulder", "shoulder_Z"), ("Elbow", "elbow_Z"), ("Wrist", "wrist")],
+                        radii=(0.045, 0.035))
 
 
 def load_leg() -> BodyModel:
     """The paper's 3D leg: hip and knee of 3 DOF each, end effector at the ankle."""
-    model = load_urdf(_project_model("leg.urdf"))
+    return _paper_chain("leg.urdf", [("Hip", "hip_Z"), ("Knee", "knee_Z"), ("Ankle", "ankle")], radii=(0.07, 0.05))
+
+
+def _paper_chain(file_name: str, keypoint_frames: list[tuple[str, str]], radii: tuple[float, float]) -> BodyModel:
+    """A two-segment chain of the project's models: keypoints (name, frame) from root to end effector."""
+    names = [name for name, _ in keypoint_frames]
     return BodyModel(
-        model=model,
-        keypoints={"Hip": "hip_Z", "Knee": "knee_Z", "Ankle": "ankle"},
-        segments=[("Hip", "Knee"), ("Knee", "Ankle")],
-        segment_radii=np.array([0.07, 0.05]),
-        end_effectors=["Ankle"],
+        model=load_urdf(_project_model(file_name)),
+        keypoints=dict(keypoint_frames),
+        segments=list(pairwise(names)),
+        segment_radii=np.array(radii),
+        end_effectors=[names[-1]],
     )
 
 
