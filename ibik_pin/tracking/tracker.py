@@ -68,6 +68,10 @@ class TrackingSettings:
             that is not a target on the image criterion, pull each toward a clearly better sample
             and solve again (tracking.swivel): recovers limbs that fast motion threw into another
             basin of the criterion. Runs only when two views cross (tracking.swivel.views_cross).
+            Off by default: on the real-mocap benchmark it bought little over the two-way
+            criterion alone (walking knees 11.1 -> 10.3 mm, 2 views), ran 3-10 times slower, and
+            on the real video's background-subtraction silhouettes it trusted bad masks (elbows
+            and knees 50.3 -> 63.4 mm from Pose2Sim's triangulation).
         feet_by_ankle: toe and heel targets move only the joints that do not move their ankle
             (Tracker._foot_point_joints); False lets them move the whole leg, as a plain
             end-effector target does.
@@ -85,7 +89,7 @@ class TrackingSettings:
     criterion: str = "two-way"
     axis_weight: float = 1.0
     axis_scale: float = 0.10
-    swivel_search: bool = True
+    swivel_search: bool = False
     feet_by_ankle: bool = True
 
 
