@@ -10,6 +10,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from ibik_pin.configuration import Configuration
 from ibik_pin.limits import JointLimits
 from ibik_pin.model import load_human
 
@@ -36,3 +37,16 @@ def random_human_configuration(body, rng, spread: float = 0.6) -> np.ndarray:
     q[:3] = rng.normal(0.0, 0.3, 3)
     q[3:7] = pin.Quaternion(pin.exp3(rng.normal(0.0, 0.3, 3))).coeffs()
     return q
+
+
+def central_difference_gradient(task, model, q, eps=1e-6):
+    """d task.compute_value / dv at q by central differences (steps of `eps` through pin.integrate),
+    shape (nv,): the reference every analytic gradient is checked against."""
+    gradient = np.zeros(model.nv)
+    for k in range(model.nv):
+        dv = np.zeros(model.nv)
+        dv[k] = eps
+        plus = task.compute_value(Configuration(model, pin.integrate(model, q, dv)))
+        minus = task.compute_value(Configuration(model, pin.integrate(model, q, -dv)))
+        gradient[k] = (plus - minus) / (2 * eps)
+    return gradient

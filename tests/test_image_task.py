@@ -1,7 +1,6 @@
 import warnings
 
 import numpy as np
-import pinocchio as pin
 import pytest
 
 from ibik_pin.configuration import Configuration
@@ -11,18 +10,7 @@ from ibik_pin.tasks import ImageTask, View
 from ibik_pin.vision.pinhole import look_at_camera
 from ibik_pin.vision.render import render_capsules
 from ibik_pin.vision.support import SupportImage, support_from_mask
-from tests.conftest import random_human_configuration
-
-
-def central_difference_gradient(task, model, q, eps=1e-6):
-    gradient = np.zeros(model.nv)
-    for k in range(model.nv):
-        dv = np.zeros(model.nv)
-        dv[k] = eps
-        plus = task.compute_value(Configuration(model, pin.integrate(model, q, dv)))
-        minus = task.compute_value(Configuration(model, pin.integrate(model, q, -dv)))
-        gradient[k] = (plus - minus) / (2 * eps)
-    return gradient
+from tests.conftest import central_difference_gradient, random_human_configuration
 
 
 def smooth_support(mask, sigma_px):

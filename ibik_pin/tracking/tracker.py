@@ -194,21 +194,23 @@ class Tracker:
         if self.settings.criterion not in CRITERIA:
             raise InputError(f"criterion: expected one of {', '.join(CRITERIA)}, found {self.settings.criterion!r}")
         self.axis_task = SilhouetteAxisTask(body, max_step_size=self.settings.image_step)
-        # The gradient task of the image level: the paper's overlap, or the two-way sum.
-        self.image_criterion: GradientTask = self.image_task
-        if self.settings.criterion == "two-way":
-            self.image_criterion = WeightedSum([self.image_task, self.axis_task], [1.0, self.settings.axis_weight],
-                                               max_step_size=self.settings.image_step)
-        self._target_tasks: dict[str, FramePositionTask] = {}
-        self._hint_tasks: dict[str, FramePositionTask] = {}
         terms: list[tuple[SegmentCriterion, float]] = [(self.image_task, 1.0)]
         if self.settings.criterion == "two-way":
             terms.append((self.axis_task, self.settings.axis_weight))
+        # The gradient task of the image level: the paper's overlap, or the two-way sum.
+        self.image_criterion: GradientTask = self.image_task
+        if len(terms) > 1:
+            self.image_criterion = WeightedSum([task for task, _ in terms], [weight for _, weight in terms],
+                                               max_step_size=self.settings.image_step)
         self.swivel = SwivelSearch(body, terms)
+        # The cameras are fixed for the tracker's life, so whether the search can run is decided once.
+        self._search_swivels = self.settings.swivel_search and views_cross(self.cameras)
+        self._target_tasks: dict[str, FramePositionTask] = {}
+        self._hint_tasks: dict[str, FramePositionTask] = {}
 
     def _follow_swivel_hints(self, configuration: Configuration, names: list[str], present: np.ndarray,
                              levels: list[list]) -> None:
-        """Pull the free elbows and knees to their swivel hints, then solve every level again."""
+        """Solve again with the free elbows and knees held at their swivel hints, if any."""
         targeted = {name for name, here in zip(names, present, strict=True) if here}
         free = [name for name in LIMB_ENDS if name not in targeted]
         hints = self.swivel.hints(configuration, free)
@@ -338,7 +340,7 @@ class Tracker:
             else:
                 solved = self.solver.solve(configuration, levels, iterations=self.settings.iterations)
             result.level_reports.append(solved.levels)
-            if use_image and self.settings.swivel_search and views_cross(self.cameras):
+            if use_image and self._search_swivels:
                 self._follow_swivel_hints(configuration, names, present, levels)
             result.solve_seconds += time.perf_counter() - started
             result.q[frame] = configuration.q
