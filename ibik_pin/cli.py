@@ -56,10 +56,14 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--criterion", choices=("paper", "two-way"), default="two-way",
                         help="image criterion: two-way (default), the overlap of eq. (5)-(6) plus the "
                              "silhouette's medial axis explained by the skeleton; paper: the overlap alone")
-    parser.add_argument("--swivel-search", action=argparse.BooleanOptionalAction, default=False,
-                        help="after each frame, search every free elbow's and knee's swivel on the image "
-                             "criterion and pull it to a clearly better one (default: off; for clean "
-                             "silhouettes and fast limbs, several times slower)")
+    parser.add_argument("--swivel-search", action=argparse.BooleanOptionalAction, default=True,
+                        help="each frame, search every free elbow's and knee's swivel on the image "
+                             "criterion and hold it at a clearly better one (default: on; runs only when "
+                             "two views cross)")
+    parser.add_argument("--image-moves", choices=("limbs", "all"), default="limbs",
+                        help="what the image level may move: limbs (default): the arms and legs, with the "
+                             "root, spine, clavicles and neck held where the targets put them; all: every "
+                             "joint the targets leave free, as in the paper")
     parser.add_argument("--trc-axes", choices=("auto", "y-up", "z-up"), default="auto",
                         help="axis convention of the TRC files: y-up as Pose2Sim and OpenSim write "
                              "them, z-up in the calibration's own world (as many mocap systems "
@@ -93,7 +97,8 @@ def _job(arguments: argparse.Namespace) -> TrackJob:
         model=arguments.model,
         settings=TrackingSettings(method=arguments.method, iterations=arguments.iterations,
                                   use_image=not arguments.no_image, mask_filter_radius=arguments.mask_filter,
-                                  criterion=arguments.criterion, swivel_search=arguments.swivel_search),
+                                  criterion=arguments.criterion, swivel_search=arguments.swivel_search,
+                                  image_moves=arguments.image_moves),
         overlay=arguments.overlay,
         quiet=arguments.quiet,
         trc_axes=arguments.trc_axes,

@@ -21,6 +21,8 @@ from ibik_pin.exceptions import FileFormatError, InputError, UnknownNameError
 HUMAN_URDF_RELATIVE = Path("example-robot-data/robots/human_description/robots/human.urdf")
 #: Links of this prefix in a URDF are keypoints (``keypoint_Neck`` is the Neck), see load_human.
 KEYPOINT_LINK_PREFIX = "keypoint_"
+# Joint names of the arms and legs (the human URDF's left_elbow_Z, the paper chains' elbow_Z, ...).
+LIMB_JOINT_WORDS = ("shoulder", "elbow", "wrist", "hip", "knee", "ankle")
 
 
 @dataclass
@@ -63,6 +65,18 @@ class BodyModel:
     def segment_frame_ids(self) -> np.ndarray:
         """Frame indices of segment ends, shape (S, 2)."""
         return np.array([[self.frame_id(a), self.frame_id(b)] for a, b in self.segments], dtype=int)
+
+    @property
+    def limb_coordinates(self) -> np.ndarray:
+        """(nv,) bool: the velocity coordinates of the arms and legs, the joints whose name holds
+        one of LIMB_JOINT_WORDS (shoulder to wrist, hip to ankle); the root, spine, clavicles and
+        neck are the rest."""
+        mask = np.zeros(self.model.nv, dtype=bool)
+        for joint_id in range(1, self.model.njoints):
+            if any(word in self.model.names[joint_id].lower() for word in LIMB_JOINT_WORDS):
+                joint = self.model.joints[joint_id]
+                mask[joint.idx_v: joint.idx_v + joint.nv] = True
+        return mask
 
 
 def frame_id(model: pin.Model, frame_name: str) -> int:

@@ -25,6 +25,17 @@ def test_the_human_has_36_joints_and_a_free_flyer(human):
     assert human.model.nv == 42
 
 
+def test_the_limbs_of_the_human_are_its_arms_and_legs(human):
+    model = human.model
+    limbs = human.limb_coordinates
+    not_limbs = {model.names[j] for j in range(1, model.njoints) if not limbs[model.joints[j].idx_v]}
+    assert not_limbs == {"root_joint", "middle_lumbar_Z", "middle_lumbar_X", "middle_thoracic_Z", "middle_thoracic_X",
+                         "middle_thoracic_Y", "left_clavicle_joint_X", "right_clavicle_joint_X",
+                         "middle_cervical_Z", "middle_cervical_X", "middle_cervical_Y"}
+    assert limbs.sum() == 26  # 2 x (3 shoulder + 2 elbow + 2 wrist) + 2 x (3 hip + 1 knee + 2 ankle)
+    assert load_arm().limb_coordinates.all()
+
+
 def test_the_human_loads_without_a_free_flyer_too():
     body = load_human(free_flyer=False)
     assert body.model.nv == 36

@@ -179,10 +179,15 @@ def test_qp_objects_are_kept_between_steps(human):
     solver = HierarchicalQPSolver(limits=JointLimits(human.model, max_step=1e-3, max_root_translation=1e-3))
     configuration = Configuration(human.model)
     solver.compute_step(configuration, levels)
-    first = {level: entry[1] for level, entry in solver._qps.items()}
+    first = dict(solver._qps)
     solver.compute_step(configuration, levels)
     assert len(first) == 3
-    assert all(solver._qps[level][1] is qp for level, qp in first.items())
+    assert all(solver._qps[key] is qp for key, qp in first.items())
+    # A stack of another shape solved in between (the tracker's targets-only steps) keeps its own
+    # objects and leaves these in place.
+    solver.compute_step(configuration, levels[:1])
+    solver.compute_step(configuration, levels)
+    assert all(solver._qps[key] is qp for key, qp in first.items())
 
 
 def test_proxsuite_level_solution_equals_the_damped_least_squares_step_without_active_bounds():

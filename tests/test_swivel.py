@@ -70,6 +70,39 @@ def test_the_search_hints_the_elbow_back_toward_the_pose_of_the_silhouette(human
     assert "RElbow" not in hints  # already where its silhouette says
 
 
+def test_a_limb_whose_ends_leave_the_silhouettes_is_not_searched(human):
+    import pinocchio as pin
+
+    true_q = pin.neutral(human.model)
+    for joint, angle in [("left_shoulder_X", -1.2), ("left_elbow_Z", 1.3)]:
+        true_q[human.model.joints[human.model.getJointId(joint)].idx_q] = angle
+    image_views, axis_views = _views(human, true_q)
+    image = ImageTask(human, image_views)
+    configuration = Configuration(human.model, true_q)
+    shoulder, elbow, wrist = configuration.frame_positions(human.frame_ids(["LShoulder", "LElbow", "LWrist"]))
+    assert image.inside_silhouettes(np.array([shoulder, elbow, wrist])).all()
+    away = wrist + np.array([0.0, 0.0, 0.5])  # half a metre beside the arm
+    assert not image.inside_silhouettes(away[None]).any()
+    wrong = swivel_circle(shoulder, elbow, wrist, 3)[1]
+
+    def moved(wrist_at):
+        class Moved:  # the elbow swivelled away, the wrist where asked
+            def frame_positions(self, ids):
+                positions = configuration.frame_positions(ids).copy()
+                positions[np.asarray(ids) == human.frame_id("LElbow")] = wrong
+                positions[np.asarray(ids) == human.frame_id("LWrist")] = wrist_at
+                return positions
+        return Moved()
+
+    terms = [(image, 1.0), (SilhouetteAxisTask(human, axis_views), 1.0)]
+    trusting = SwivelSearch(human, terms, samples=36, inside_silhouettes=image.inside_silhouettes)
+    assert "LElbow" in trusting.hints(moved(wrist), ["LElbow"])
+    # A wrist the silhouettes do not show where the target puts it: the views are not trusted,
+    # where a search that trusts them still moves the elbow.
+    assert trusting.hints(moved(away), ["LElbow"]) == {}
+    assert "LElbow" in SwivelSearch(human, terms, samples=36).hints(moved(away), ["LElbow"])
+
+
 def test_a_search_needs_three_samples(human):
     with pytest.raises(InputError, match="at least 3"):
         SwivelSearch(human, [], samples=2)

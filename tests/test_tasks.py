@@ -39,6 +39,19 @@ def test_posture_task_jacobian_matches_finite_differences(human, rng):
     assert relative_error(finite_difference_jacobian(task, human.model, q), analytic) < 1e-4
 
 
+def test_a_posture_task_on_chosen_coordinates_includes_the_root(human, rng):
+    held = ~human.limb_coordinates  # root, spine, clavicles, neck
+    q = random_human_configuration(human, rng)
+    # Held where it is, as the tracker holds the trunk: the identity is the root's exact Jacobian there.
+    task = PostureTask(human.model, q, coordinates=held)
+    analytic = task.compute_jacobian(Configuration(human.model, q))
+    assert analytic.shape == (int(held.sum()), 42)
+    assert np.allclose(analytic[:6, :6], np.eye(6))  # the free flyer's six are held too
+    assert relative_error(finite_difference_jacobian(task, human.model, q), analytic) < 1e-4
+    with pytest.raises(InputError, match=r"coordinates: expected a bool mask of shape \(42,\)"):
+        PostureTask(human.model, coordinates=held[:-1])
+
+
 def test_position_task_error_is_frame_minus_target(human):
     configuration = Configuration(human.model)
     task = FramePositionTask(human.model, "Hip", target=[0.0, 0.0, 0.5])

@@ -67,10 +67,7 @@ def test_a_target_absent_in_one_frame_is_reported_dropped(human, sequence):
 
 def test_tracking_with_the_image_reports_the_image_level_and_the_overlap(human, sequence):
     motion, targets = sequence
-    center = Configuration(human.model, motion[0]).frame_position(human.frame_id("Hip"))
-    cameras = [look_at_camera(name, (160, 120), 150.0, center + offset, center, np.array([0.0, 1.0, 0.0]))
-               for name, offset in [("front", [3.5, 0.3, 0.5]), ("side", [0.4, 0.5, -3.8])]]
-    masks = [render_silhouettes(human, q, cameras) for q in motion]
+    cameras, masks = _two_views(human, motion)
     tracker = Tracker(human, cameras, fast_settings(iterations=5, first_frame_iterations=20))
     result = tracker.track(TARGETS, targets, silhouettes=lambda frame: masks[frame])
     assert result.level_names == ["lower-body targets", "upper-body targets", "image", "posture"]
@@ -81,6 +78,56 @@ def test_tracking_with_the_image_reports_the_image_level_and_the_overlap(human, 
     assert result.overlap.shape == (FRAMES, 2)
     assert result.overlap.min() > 0.5  # the skeleton lies inside both silhouettes
     assert np.nanmax(result.target_distances) < 2e-3
+
+
+def _two_views(human, motion):
+    center = Configuration(human.model, motion[0]).frame_position(human.frame_id("Hip"))
+    cameras = [look_at_camera(name, (160, 120), 150.0, center + offset, center, np.array([0.0, 1.0, 0.0]))
+               for name, offset in [("front", [3.5, 0.3, 0.5]), ("side", [0.4, 0.5, -3.8])]]
+    return cameras, [render_silhouettes(human, q, cameras) for q in motion]
+
+
+def _image_solves(tracker):
+    """Spy on the tracker's solver: (q before, q after) of every solve whose levels hold the image."""
+    spied, solve = [], tracker.solver.solve
+
+    def spy(configuration, levels, **options):
+        before = configuration.q.copy()
+        result = solve(configuration, levels, **options)
+        if any(tracker.image_criterion in level for level in levels):
+            spied.append((before, configuration.q.copy()))
+        return result
+    tracker.solver.solve = spy
+    return spied
+
+
+@pytest.mark.parametrize("image_moves", ["limbs", "all"])
+def test_the_image_steps_move_the_trunk_only_when_asked(human, sequence, image_moves):
+    motion, targets = sequence
+    # Targets that the trunk cannot meet: the Neck 3 cm forward of where the model can put it.
+    targets = targets.copy()
+    targets[:, TARGETS.index("Neck"), 0] += 0.03
+    cameras, masks = _two_views(human, motion)
+    tracker = Tracker(human, cameras, fast_settings(iterations=5, first_frame_iterations=20,
+                                                    image_moves=image_moves, swivel_search=False))
+    spied = _image_solves(tracker)
+    result = tracker.track(TARGETS, targets, silhouettes=lambda frame: masks[frame])
+    assert len(spied) == FRAMES  # one solve with the image per frame
+    # Velocity coordinates of the root, spine, clavicles and neck: pin.difference measures each move.
+    held = ~human.limb_coordinates
+    moves = np.array([np.abs(pin.difference(human.model, before, after)[held]).max() for before, after in spied])
+    limb_moves = np.array([np.abs(pin.difference(human.model, before, after)[~held]).max() for before, after in spied])
+    assert limb_moves.max() > 1e-3  # the image steps do move the limbs
+    if image_moves == "limbs":
+        assert moves.max() < 1e-9
+        assert [reports[2].kind for reports in result.level_reports] == ["gradient"] * FRAMES
+    else:
+        assert moves.max() > 1e-6
+
+
+def test_an_unknown_image_moves_is_refused(human):
+    with pytest.raises(InputError, match="image_moves: expected one of limbs, all, found 'trunk'"):
+        Tracker(human, settings=fast_settings(image_moves="trunk"))
 
 
 def test_an_unknown_keypoint_is_refused_with_the_known_ones(human, sequence):

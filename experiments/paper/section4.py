@@ -297,7 +297,8 @@ def run_full_body(
     solver_name = {"ik": "ik", "pik": "stack"}.get(method, scheme)
     # The paper's method as published: its criterion, no swivel search, every target an end effector.
     settings = TrackingSettings(method=solver_name, iterations=iterations, use_image=use_image,
-                                criterion="paper", swivel_search=False, feet_by_ankle=False)
+                                criterion="paper", swivel_search=False, feet_by_ankle=False,
+                                image_moves="all")
     tracker = Tracker(clip.body, views.cameras if (use_image and views) else [], settings)
     result = tracker.track(names, targets, (lambda frame: views.masks[frame]) if use_image else None)
     estimated = [result.keypoint_names.index(name) for name in ESTIMATED]

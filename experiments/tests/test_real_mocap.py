@@ -57,23 +57,26 @@ def results(tmp_path_factory):
         inputs = prepare_inputs(spec, TEST_DATA, FRAMES, cache)
         for name in ("pik", "ibik2v"):
             runs[kind, name] = run_variant(inputs, variant(name), "clean")
-        if kind == "boxing":
-            runs[kind, "ibik2v_swivel"] = run_variant(inputs, variant("ibik2v"), "clean", {"swivel_search": True})
     return runs
 
 
-@pytest.mark.xfail(strict=True, reason="measured with the default settings (two-way criterion, no swivel "
-                   "search): elbows IBIK 2v 97.7 mm, PIK 121.4 mm (20% below); the swivel search meets it")
 def test_ibik_with_two_views_cuts_pik_boxing_elbow_error_by_40_percent_and_stays_under_25_mm(results):
     pik, ibik = results["boxing", "pik"].judged_mm, results["boxing", "ibik2v"].judged_mm
     assert ibik <= (1.0 - MIN_REDUCTION) * pik, f"IBIK {ibik:.1f} mm, PIK {pik:.1f} mm"
     assert ibik <= MAX_IBIK_ERROR_MM, f"IBIK {ibik:.1f} mm"
 
 
-def test_the_swivel_search_cuts_pik_boxing_elbow_error_by_40_percent_and_stays_under_25_mm(results):
-    pik, ibik = results["boxing", "pik"].judged_mm, results["boxing", "ibik2v_swivel"].judged_mm
-    assert ibik <= (1.0 - MIN_REDUCTION) * pik, f"IBIK {ibik:.1f} mm, PIK {pik:.1f} mm"
-    assert ibik <= MAX_IBIK_ERROR_MM, f"IBIK {ibik:.1f} mm"
+@pytest.mark.parametrize("kind", ["walking", "boxing"])
+def test_the_image_does_not_pull_the_targets_off(kind, results):
+    """Every target keypoint stays, on average, within 3 mm of where the blind solve puts it: the
+    image moves the limbs, not the trunk (with the trunk free, the boxing Neck ended 57 mm off
+    against 20 mm without the image, on the 2-s window this excerpt comes from). The toes are
+    allowed 10 mm: a rigid two-axis foot cannot meet the data's toe, and the hip's axial rotation
+    that turns the foot is also the knee's swivel, which the image sets (walking: 5-8 mm more)."""
+    pik, ibik = results[kind, "pik"].residuals_mm, results[kind, "ibik2v"].residuals_mm
+    allowed = {name: 10.0 if "Toe" in name or "Heel" in name else 3.0 for name in pik}
+    worse = {name: round(ibik[name] - pik[name], 1) for name in pik if ibik[name] > pik[name] + allowed[name]}
+    assert worse == {}, f"residual increase over PIK [mm]: {worse}"
 
 
 def test_ibik_with_two_views_keeps_the_walking_knees_under_25_mm_and_no_worse_than_pik(results):

@@ -12,9 +12,10 @@ reported "relaxed" (the least-squares relaxation).
 
 A level whose unconstrained optimum (the projection stack's step, one SVD away) already respects
 every bound needs no QP. Otherwise one proxsuite dense QP object per level, created once and
-updated, is warm-started from its previous result across iterations and frames; it is rebuilt only
-when a level's size changes (a target dropped for a frame). A backend failure skips that level
-(reported "failed"), never raises.
+updated, is warm-started from its previous result across iterations and frames. Objects are kept
+per level and size, so stacks of different shapes solved in turn (a tracker's targets-only steps,
+then its steps with the image; a target dropped for a frame) each keep theirs. A backend failure
+skips that level (reported "failed"), never raises.
 """
 
 from __future__ import annotations
@@ -68,13 +69,13 @@ class HierarchicalQPSolver(Solver):
         super().__init__(limits=limits, damping=damping)
         self.accuracy = float(accuracy)
         self.max_qp_iterations = int(max_qp_iterations)
-        self._qps: dict[int, tuple[tuple[int, int], object]] = {}  # level -> ((n, n_in), QP)
+        self._qps: dict[tuple[int, int, int], object] = {}  # (level, n, n_in) -> QP
 
     def _qp(self, level: int, n: int, n_in: int):
-        """The level's QP object, reused while its size holds; returns it and whether it is new."""
-        cached = self._qps.get(level)
-        if cached is not None and cached[0] == (n, n_in):
-            return cached[1], False
+        """The QP object of this level and size, created once; returns it and whether it is new."""
+        cached = self._qps.get((level, n, n_in))
+        if cached is not None:
+            return cached, False
         qp = proxsuite.proxqp.dense.QP(n, 0, n_in)
         qp.settings.eps_abs = self.accuracy
         qp.settings.eps_rel = 0.0
@@ -84,7 +85,7 @@ class HierarchicalQPSolver(Solver):
         # Bounds active on coordinates that the level's rows barely move make proxsuite declare a
         # feasible problem "primal infeasible"; this mode returns the closest feasible point instead.
         qp.settings.primal_infeasibility_solving = True
-        self._qps[level] = ((n, n_in), qp)
+        self._qps[(level, n, n_in)] = qp
         return qp, True
 
     def compute_step(self, configuration: Configuration, levels: Levels) -> StepResult:
@@ -146,7 +147,7 @@ class HierarchicalQPSolver(Solver):
                     return _polish(w, qp.results.z, hessian, linear, constraint, lower, upper)
             except (RuntimeError, ValueError):
                 pass
-            self._qps.pop(index, None)
+            self._qps.pop((index, hessian.shape[0], constraint.shape[0]), None)
         return None
 
 

@@ -162,6 +162,16 @@ class ImageTask(SegmentCriterion):
         support = np.where(depth > 1e-6, view.support.sample(pixels).values, 0.0)
         return support.reshape(points.shape[:2]).sum(axis=1)
 
+    def inside_silhouettes(self, points: np.ndarray, tolerance_px: float = 2.0) -> np.ndarray:
+        """(N,) bool: each world point (N, 3) [m] projects inside the silhouette, or within
+        `tolerance_px` of it, in every enabled view (the support is a signed distance, positive
+        inside: the silhouette's border is 0)."""
+        inside = np.ones(len(points), dtype=bool)
+        for view in self._active_views:
+            pixels, _, depth = view.camera.project_with_jacobian(np.asarray(points, dtype=float))
+            inside &= (depth > 1e-6) & (view.support.sample(pixels).values > -float(tolerance_px))
+        return inside
+
     def compute_value(self, configuration: Configuration) -> float:
         return self._evaluate(configuration)[0]
 

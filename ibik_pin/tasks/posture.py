@@ -11,10 +11,14 @@ from ibik_pin.tasks.base import Task
 
 
 class PostureTask(Task):
-    """e = q (-) q_ref on the actuated joints (the free-flyer root, if any, is left free).
+    """e = q (-) q_ref on chosen velocity coordinates: by default the actuated joints (the
+    free-flyer root, if any, is left free).
 
     The Jacobian is the identity on those velocity coordinates, exact for revolute and prismatic
-    joints.
+    joints, and for a free-flyer root at the reference (where a hold keeps it). Holding
+    coordinates where they are (`coordinates` a mask, reference the current q) at the top of a
+    stack freezes them for the levels below, which is how the tracker keeps the trunk out of the
+    image level's reach.
     """
 
     def __init__(
@@ -23,12 +27,23 @@ class PostureTask(Task):
         reference: np.ndarray | None = None,
         gain: float = 1.0,
         weight: float = 1.0,
+        coordinates: np.ndarray | None = None,
     ) -> None:
+        """
+        Args:
+            coordinates: (nv,) bool mask of the velocity coordinates the task holds; None: every
+                coordinate but a free-flyer root's six.
+        """
         super().__init__(gain, weight)
         self.model = model
-        root_is_free = model.njoints > 1 and model.joints[1].shortname() == "JointModelFreeFlyer"
-        first = 6 if root_is_free else 0
-        self._rows = np.arange(first, model.nv)
+        if coordinates is None:
+            root_is_free = model.njoints > 1 and model.joints[1].shortname() == "JointModelFreeFlyer"
+            self._rows = np.arange(6 if root_is_free else 0, model.nv)
+        else:
+            mask = np.asarray(coordinates, dtype=bool)
+            if mask.shape != (model.nv,):
+                raise InputError(f"coordinates: expected a bool mask of shape ({model.nv},), got {mask.shape}")
+            self._rows = np.flatnonzero(mask)
         self._jacobian = np.eye(model.nv)[self._rows]
         self.set_reference(pin.neutral(model) if reference is None else reference)
 

@@ -8,6 +8,8 @@ targets, iterations, initial state and limits).
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import time
 import warnings
 from collections.abc import Callable, Sequence
@@ -32,6 +34,7 @@ from ibik_pin.vision.segmentation import TemporalMajority
 LOWER_BODY = {"Hip", "LHip", "RHip", "LKnee", "RKnee", "LAnkle", "RAnkle", "LBigToe", "LSmallToe",
               "LHeel", "RBigToe", "RSmallToe", "RHeel"}
 CRITERIA = ("paper", "two-way")
+IMAGE_MOVES = ("limbs", "all")
 # Foot points and the ankle each belongs to (see Tracker._foot_point_joints).
 FOOT_POINT_ANKLES = {f"{side}{point}": f"{side}Ankle" for side in "LR" for point in ("BigToe", "SmallToe", "Heel")}
 
@@ -64,17 +67,22 @@ class TrackingSettings:
         axis_weight: weight of the silhouette-axis term in the two-way criterion.
         axis_scale: the axis term's robust scale [m] at the subject's distance: an axis sample
             farther than about this from every projected segment stops pulling.
-        swivel_search: after each frame's solve, sample the swivel circle of every elbow and knee
-            that is not a target on the image criterion, pull each toward a clearly better sample
-            and solve again (tracking.swivel): recovers limbs that fast motion threw into another
-            basin of the criterion. Runs only when two views cross (tracking.swivel.views_cross).
-            Off by default: on the real-mocap benchmark it bought little over the two-way
-            criterion alone (walking knees 11.1 -> 10.3 mm, 2 views), ran 3-10 times slower, and
-            on the real video's background-subtraction silhouettes it trusted bad masks (elbows
-            and knees 50.3 -> 63.4 mm from Pose2Sim's triangulation).
+        swivel_search: once each frame's targets are met, sample the swivel circle of every
+            elbow and knee that is not a target on the image criterion and hold each at a clearly
+            better sample, below the targets and above the image level, for the frame's image
+            steps (tracking.swivel): recovers limbs that fast motion threw into another basin of
+            the criterion, which local steps never leave. Runs only when two views cross
+            (tracking.swivel.views_cross). On by default: with the trunk held (image_moves) it
+            brought the real-mocap benchmark's boxing elbows from about 100 mm to under 20 mm
+            (2 views; README), at about half the frame rate.
         feet_by_ankle: toe and heel targets move only the joints that do not move their ankle
             (Tracker._foot_point_joints); False lets them move the whole leg, as a plain
             end-effector target does.
+        image_moves: "limbs" (default): each frame first takes `target_iterations` steps on the
+            targets alone, then holds the root, spine, clavicles and neck where those left them
+            (BodyModel.limb_coordinates) for the steps with the image, so the image moves only
+            the arms and legs; "all": the paper's scheme, every step with every level.
+        target_iterations: the targets-only steps of each frame with image_moves="limbs".
     """
 
     method: str = "qp"
@@ -89,8 +97,10 @@ class TrackingSettings:
     criterion: str = "two-way"
     axis_weight: float = 1.0
     axis_scale: float = 0.10
-    swivel_search: bool = False
+    swivel_search: bool = True
     feet_by_ankle: bool = True
+    image_moves: str = "limbs"
+    target_iterations: int = 5
 
 
 @dataclass
@@ -114,8 +124,9 @@ class TrackingResult:
             targets", "upper-body targets", "image" (when the image is used), "posture".
         level_reports: per frame, per level (L), the solver's report of the frame solve's last
             step: status ("solved", "relaxed", "failed", "empty") and residual (NaN for the image
-            level, which reports its criterion instead). With `swivel_search`, the frame's main
-            solve, before the swivel pass.
+            level, which reports its criterion instead). With `swivel_search`, the solve that
+            follows the swivel hints, the hints' own level left out (image_moves="all": the main
+            solve, before the swivel pass).
     """
 
     q: np.ndarray
@@ -146,6 +157,7 @@ def solve_first_frame(
     starts: int = 1,
     spread: float = 0.5,
     seed: int = 0,
+    solve: Callable[..., SolveResult] | None = None,
 ) -> SolveResult:
     """The first frame, from configuration.q: blind IK, then every level; with `starts` > 1 also
     from random joint angles (a fraction `spread` of each range around the middle, root kept),
@@ -153,8 +165,10 @@ def solve_first_frame(
 
     Later frames warm-start from this one and follow the criterion's local maximum, so a wrong
     basin on the first frame (an elbow 20 cm off with its forearm still on the silhouette) lasts;
-    several starts make that much rarer.
+    several starts make that much rarer. `solve(configuration, levels, iterations=)` solves with
+    the image (default solver.solve; the tracker passes its frame solve).
     """
+    solve = solver.solve if solve is None else solve
     blind = [level for level in levels if image_task not in level]
     limits = solver.limits
     rng = np.random.default_rng(seed)
@@ -170,7 +184,7 @@ def solve_first_frame(
         blind_result = solver.solve(configuration, blind, iterations=iterations)
         if image_task is None:
             return blind_result
-        solved = solver.solve(configuration, levels, iterations=iterations)
+        solved = solve(configuration, levels, iterations=iterations)
         solutions.append((image_task.compute_value(configuration), configuration.q.copy(), solved))
     # The first of the highest criteria, as max() keeps the earliest of equal keys.
     _, best_q, best_result = max(solutions, key=lambda solution: solution[0])
@@ -202,31 +216,82 @@ class Tracker:
         if len(terms) > 1:
             self.image_criterion = WeightedSum([task for task, _ in terms], [weight for _, weight in terms],
                                                max_step_size=self.settings.image_step)
-        self.swivel = SwivelSearch(body, terms)
+        self.swivel = SwivelSearch(body, terms, inside_silhouettes=self.image_task.inside_silhouettes)
+        if self.settings.image_moves not in IMAGE_MOVES:
+            raise InputError(f"image_moves: expected one of {', '.join(IMAGE_MOVES)}, "
+                             f"found {self.settings.image_moves!r}")
+        if int(self.settings.target_iterations) < 1:
+            raise InputError(f"target_iterations: expected at least 1, found {self.settings.target_iterations}")
+        held = ~body.limb_coordinates
+        # Holds the trunk during the image steps (see _solve); None when the image may move everything.
+        self._trunk_hold = (PostureTask(model, coordinates=held)
+                            if self.settings.image_moves == "limbs" and held.any() else None)
         # The cameras are fixed for the tracker's life, so whether the search can run is decided once.
         self._search_swivels = self.settings.swivel_search and views_cross(self.cameras)
         self._target_tasks: dict[str, FramePositionTask] = {}
         self._hint_tasks: dict[str, FramePositionTask] = {}
 
-    def _follow_swivel_hints(self, configuration: Configuration, names: list[str], present: np.ndarray,
-                             levels: list[list]) -> None:
-        """Solve again with the free elbows and knees held at their swivel hints, if any."""
-        targeted = {name for name, here in zip(names, present, strict=True) if here}
-        free = [name for name in LIMB_ENDS if name not in targeted]
-        hints = self.swivel.hints(configuration, free)
-        if not hints:
-            return
-        hint_tasks = []
-        for name, position in hints.items():
+    def _swivel_hints(self, configuration: Configuration, free: Sequence[str]) -> list[FramePositionTask]:
+        """Position tasks that hold each free elbow and knee at its swivel hint (tracking.swivel);
+        empty when no sample of any circle is clearly better than where the joint is."""
+        tasks = []
+        for name, position in self.swivel.hints(configuration, free).items():
             if name not in self._hint_tasks:
                 self._hint_tasks[name] = FramePositionTask(self.body.model, self.body.keypoints[name])
             self._hint_tasks[name].set_target(position)
-            hint_tasks.append(self._hint_tasks[name])
-        # The hints rank below every end effector, so a hint that cannot be met bends nothing else,
-        # and above the image level, whose local climb would otherwise take the joint back.
+            tasks.append(self._hint_tasks[name])
+        return tasks
+
+    def _with_hints(self, levels: list[list], hints: list[FramePositionTask]) -> tuple[list[list], int | None]:
+        """The levels with the hints as a level of their own, and that level's index (None: no hint).
+
+        The hints rank below every end effector, so a hint that cannot be met bends nothing else,
+        and above the image level, whose local climb would otherwise take the joint back.
+        """
+        if not hints:
+            return levels, None
         targets = [level for level in levels if self.image_criterion not in level and self.posture not in level]
-        self.solver.solve(configuration, [*targets, hint_tasks, [self.image_criterion], [self.posture]],
-                          iterations=self.settings.iterations)
+        return [*targets, hints, [self.image_criterion], [self.posture]], len(targets)
+
+    def _solve(self, configuration: Configuration, levels: list[list], iterations: int | None = None,
+               free: Sequence[str] = ()) -> SolveResult:
+        """One frame's solve from configuration.q (`iterations` steps, default the settings').
+
+        With image_moves="limbs", targets-only steps first, then the steps with the image under a
+        top level that holds the root, spine, clavicles and neck where the targets put them. Why:
+        the trunk's targets (Neck, shoulders) are rarely met exactly by the model, and their
+        least-squares compromise has weak directions; the image level, pushing the arms every
+        step, made the target level answer through the spine as well, and the trunk drifted along
+        those directions frame after frame. On real boxing (2 views) the Neck ended 180 mm from
+        its target and the shoulders 150 mm, where the targets alone kept them within 25 mm.
+        The image is there for what the targets leave free, the limbs' swivels; holding the trunk
+        leaves it exactly that.
+
+        With the swivel search, `free` names the elbows and knees that are not targets this frame:
+        their circles are searched once the targets are met (after the targets-only steps; with
+        image_moves="all", after the solve, which is then run again with the hints).
+
+        Returns the solve's result, its level reports those of `levels` (no hold, no hints).
+        """
+        iterations = self.settings.iterations if iterations is None else iterations
+        if not any(self.image_criterion in level for level in levels):
+            return self.solver.solve(configuration, levels, iterations=iterations)
+        search = self._search_swivels and bool(free)
+        if self._trunk_hold is None:
+            solved = self.solver.solve(configuration, levels, iterations=iterations)
+            hinted, _ = self._with_hints(levels, self._swivel_hints(configuration, free) if search else [])
+            if hinted is not levels:
+                self.solver.solve(configuration, hinted, iterations=iterations)
+            return solved
+        blind = [level for level in levels if self.image_criterion not in level]
+        self.solver.solve(configuration, blind, iterations=int(self.settings.target_iterations))
+        self._trunk_hold.set_reference(configuration.q)
+        hinted, hint_level = self._with_hints(levels, self._swivel_hints(configuration, free) if search else [])
+        solved = self.solver.solve(configuration, [[self._trunk_hold], *hinted], iterations=iterations)
+        reports = solved.levels[1:]
+        if hint_level is not None:
+            del reports[hint_level]
+        return dataclasses.replace(solved, levels=reports)
 
     def _levels(self, names: list[str]) -> list[list]:
         for name in names:
@@ -332,16 +397,17 @@ class Tracker:
                     if self.settings.criterion == "two-way":
                         self.axis_task.set_views(axis_views(self.cameras, masks, axis_scales))
             result.disabled_views.append(disabled)
+            # The elbows and knees this frame leaves to the image (for the swivel search).
+            free = [name for name in LIMB_ENDS if name not in names or not present[names.index(name)]]
             started = time.perf_counter()
             if frame == 0:
                 solved = solve_first_frame(self.solver, configuration, levels,
                                            self.image_criterion if use_image else None,
-                                           self.settings.first_frame_iterations, self.settings.first_frame_starts)
+                                           self.settings.first_frame_iterations, self.settings.first_frame_starts,
+                                           solve=functools.partial(self._solve, free=free))
             else:
-                solved = self.solver.solve(configuration, levels, iterations=self.settings.iterations)
+                solved = self._solve(configuration, levels, free=free)
             result.level_reports.append(solved.levels)
-            if use_image and self._search_swivels:
-                self._follow_swivel_hints(configuration, names, present, levels)
             result.solve_seconds += time.perf_counter() - started
             result.q[frame] = configuration.q
             result.keypoints[frame] = configuration.frame_positions(keypoint_ids)
