@@ -44,7 +44,8 @@ from ibik_pin.synthetic.mocap import (
 from ibik_pin.synthetic.rig import humaneva_rig
 from ibik_pin.synthetic.silhouettes import render_limb_masks, render_silhouettes
 from ibik_pin.tasks import FramePositionTask, ImageTask
-from ibik_pin.tracking.tracker import Tracker, TrackingSettings, solve_first_frame
+from ibik_pin.tracking.first_frame import solve_first_frame
+from ibik_pin.tracking.tracker import Tracker, TrackingSettings
 from ibik_pin.tracking.views import make_views, support_caps
 from ibik_pin.vision.segmentation import TemporalMajority
 

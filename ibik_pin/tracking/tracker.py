@@ -1,9 +1,11 @@
 """Tracking a recorded sequence, frame after frame, each frame warm-started from the previous one.
 
 Every keypoint present in the targets is an end-effector target (level 1: pelvis and legs, level 2:
-trunk, head and arms); the image criterion is level 3 and a light posture prior level 4. With
-`use_image=False` the identical solve runs without the image level: the blind PIK baseline (same
-targets, iterations, initial state and limits).
+trunk, head and arms); the image criterion is level 3 and a light posture prior level 4. Each frame
+first takes a few steps with the targets alone, searches the free elbows' and knees' swivels
+(tracking.swivel), then takes its image steps with the root, spine, clavicles and neck held
+(Tracker._solve). With `use_image=False` the targets' levels run alone: the blind PIK baseline
+(same targets, iterations, initial state and limits).
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from ibik_pin.tasks.base import GradientTask, Task
 from ibik_pin.tasks.segments import SegmentCriterion
 from ibik_pin.tasks.silhouette_axis import SilhouetteAxisTask
 from ibik_pin.tasks.weighted_sum import WeightedSum
+from ibik_pin.tracking.first_frame import solve_first_frame
 from ibik_pin.tracking.swivel import LIMB_ENDS, SwivelSearch, views_cross
 from ibik_pin.tracking.views import axis_views, initial_configuration, make_views, support_caps
 from ibik_pin.vision.segmentation import TemporalMajority
@@ -146,50 +149,6 @@ class TrackingResult:
     @property
     def frames_per_second(self) -> float:
         return len(self.q) / self.solve_seconds if self.solve_seconds > 0 else float("nan")
-
-
-def solve_first_frame(
-    solver,
-    configuration: Configuration,
-    levels: list[list],
-    image_task: GradientTask | None,
-    iterations: int,
-    starts: int = 1,
-    spread: float = 0.5,
-    seed: int = 0,
-    solve: Callable[..., SolveResult] | None = None,
-) -> SolveResult:
-    """The first frame, from configuration.q: blind IK, then every level; with `starts` > 1 also
-    from random joint angles (a fraction `spread` of each range around the middle, root kept),
-    keeping the solution whose image criterion is highest. Returns the kept solution's last solve.
-
-    Later frames warm-start from this one and follow the criterion's local maximum, so a wrong
-    basin on the first frame (an elbow 20 cm off with its forearm still on the silhouette) lasts;
-    several starts make that much rarer. `solve(configuration, levels, iterations=)` solves with
-    the image (default solver.solve; the tracker passes its frame solve).
-    """
-    solve = solver.solve if solve is None else solve
-    blind = [level for level in levels if image_task not in level]
-    limits = solver.limits
-    rng = np.random.default_rng(seed)
-    initial = configuration.q.copy()
-    solutions: list[tuple[float, np.ndarray, SolveResult]] = []  # criterion, q, last solve
-    for start in range(max(int(starts), 1) if image_task is not None else 1):
-        q = initial.copy()
-        if start > 0 and limits is not None:
-            middle = 0.5 * (limits.lower + limits.upper)
-            half = 0.5 * spread * (limits.upper - limits.lower)
-            q[limits.q_index] = middle + rng.uniform(-1.0, 1.0, middle.size) * half
-        configuration.update(q)
-        blind_result = solver.solve(configuration, blind, iterations=iterations)
-        if image_task is None:
-            return blind_result
-        solved = solve(configuration, levels, iterations=iterations)
-        solutions.append((image_task.compute_value(configuration), configuration.q.copy(), solved))
-    # The first of the highest criteria, as max() keeps the earliest of equal keys.
-    _, best_q, best_result = max(solutions, key=lambda solution: solution[0])
-    configuration.update(best_q)
-    return best_result
 
 
 class Tracker:
