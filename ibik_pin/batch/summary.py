@@ -39,6 +39,7 @@ class TrialOutcome:
             own targets, or --model).
         worker: the Dask worker that ran it ("" when skipped or never run).
         seconds: wall time of the trial on its worker [s] (None when not run now).
+        warnings: what `ibik track` warned about while tracking it, " | " between messages.
         error: why it failed, one line ("" when it did not).
     """
 
@@ -55,6 +56,7 @@ class TrialOutcome:
     subject: str = ""
     worker: str = ""
     seconds: float | None = None
+    warnings: str = ""
     error: str = ""
 
 
@@ -92,7 +94,7 @@ def write_summary(out: Path, outcomes: list[TrialOutcome]) -> list[Path]:
     except ImportError:
         return written
     types = {"trial": pa.string(), "status": pa.string(), "subject": pa.string(), "worker": pa.string(),
-             "error": pa.string(), "frames": pa.int64(), "limit_hit_frames": pa.int64(),
+             "warnings": pa.string(), "error": pa.string(), "frames": pa.int64(), "limit_hit_frames": pa.int64(),
              "dropped_target_frames": pa.int64()}
     schema = pa.schema([(name, types.get(name, pa.float64())) for name in names])
     table = pa.Table.from_pylist(rows, schema=schema)

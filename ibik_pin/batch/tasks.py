@@ -88,15 +88,22 @@ def run_trial(name: str, job: TrackJob, subject: SubjectOutcome | None) -> Trial
     if subject is not None:
         job = replace(job, model=subject.urdf, static=None)
     start = time.perf_counter()
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # a worker's warnings would be lost in its log
+    # A worker's warnings would be lost in its log: they go to the trial's row instead.
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
             report = run_track(job)
-    except Exception as error:  # one trial's failure, whatever it is, must not stop the others
-        return TrialOutcome(name, "failed", subject=subject_name, worker=worker_name(),
-                            seconds=time.perf_counter() - start, error=one_line(error))
+        except Exception as error:  # one trial's failure, whatever it is, must not stop the others
+            return TrialOutcome(name, "failed", subject=subject_name, worker=worker_name(),
+                                seconds=time.perf_counter() - start, warnings=_joined(caught),
+                                error=one_line(error))
     return outcome_from_report(name, "ok", report.to_dict(), subject=subject_name, worker=worker_name(),
-                               seconds=time.perf_counter() - start)
+                               seconds=time.perf_counter() - start, warnings=_joined(caught))
+
+
+def _joined(caught: list[warnings.WarningMessage]) -> str:
+    """The distinct warning messages, each on one line, joined by " | "."""
+    return " | ".join(dict.fromkeys(" ".join(str(warning.message).split()) for warning in caught))
 
 
 def completed_outcome(name: str, out: Path, overlay: bool, subject: str) -> TrialOutcome | None:
