@@ -125,6 +125,7 @@ def test_a_rerun_skips_the_done_trials_retries_the_failed_one_and_shows_the_bar(
     assert "6 trials: 0 tracked, 5 already done, 1 failed" in capsys.readouterr().out
     drawings = [line for line in re.split(r"[\r\n]", terminal.getvalue()) if line.startswith("trials:")]
     assert drawings and FINISHED_BAR.search(drawings[-1]), terminal.getvalue()
+    assert "failed=1" in drawings[-1]
     assert f"ibik: trial {CORRUPT} failed:" in terminal.getvalue()
 
 
@@ -148,6 +149,14 @@ def test_the_options_that_name_one_trials_files_are_refused(session, option, cap
 
     assert exit_info.value.code == 2
     assert "finds it in each trial folder" in capsys.readouterr().err
+
+
+def test_bad_track_options_are_refused_before_any_trial(session, capsys):
+    root, out, _, _, _ = session
+
+    assert main(["batch", str(root), "--out", str(out), "--iterations", "0"]) == 2
+
+    assert capsys.readouterr().err == "ibik: error: --iterations must be >= 1, got 0\n"
 
 
 def test_a_root_without_trials_and_workers_with_a_scheduler_are_refused(tmp_path, capsys):

@@ -77,6 +77,7 @@ def run_batch_command(arguments: argparse.Namespace, make_job: Callable[[argpars
         raise InputError(f"--workers: expected a positive number of workers and no --scheduler (the "
                          f"scheduler's cluster has its own workers), got {arguments.workers}")
     root, outroot = arguments.root.resolve(), arguments.out.resolve()
+    make_job(arguments)  # the track options are checked once, before any trial (its paths are placeholders)
     if not root.is_dir():
         raise InputError(f"ROOT {arguments.root}: not a folder")
     if outroot == root:
@@ -113,9 +114,12 @@ def run_batch_command(arguments: argparse.Namespace, make_job: Callable[[argpars
     outroot.mkdir(parents=True, exist_ok=True)
     with tqdm(total=len(trials), initial=len(outcomes), desc="trials", unit="trial",
               disable=True if arguments.quiet else None) as bar:
+        failures = [sum(outcome.status == "failed" for outcome in outcomes)]
+
         def count(outcome: TrialOutcome) -> None:
+            failures[0] += outcome.status == "failed"
+            bar.set_postfix(failed=failures[0], refresh=False)
             bar.update()
-            bar.set_postfix(failed=sum(o.status == "failed" for o in outcomes + [outcome]), refresh=False)
 
         if tasks:
             workers = arguments.workers or os.cpu_count() or 1
