@@ -22,6 +22,7 @@ import argparse
 import warnings
 from typing import TYPE_CHECKING
 
+from ibik_pin.batch.command import add_batch_arguments
 from ibik_pin.exceptions import IbikError
 from ibik_pin.solvers import SOLVERS
 
@@ -148,6 +149,11 @@ def build_parser() -> argparse.ArgumentParser:
     _add_track_arguments(track)
     calibrate = commands.add_parser("calibrate", help="fit the model to a subject's static trial, write it as URDF")
     _add_calibrate_arguments(calibrate)
+    # resolve: the batch replaces the track options that name one trial's files (batch.command).
+    batch = commands.add_parser("batch", conflict_handler="resolve",
+                                help="track every trial under a folder on Dask (pip install 'ibik_pin[batch]')")
+    _add_track_arguments(batch)
+    add_batch_arguments(batch)
     demo = commands.add_parser("demo", help="track the bundled real motion, with and without image")
     demo.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder")
     demo.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -174,6 +180,10 @@ def main(argv: list[str] | None = None) -> int:
                 print("\n".join(lines[1:]))
         elif arguments.command == "calibrate":
             _calibrate(arguments)
+        elif arguments.command == "batch":
+            from ibik_pin.batch.command import run_batch_command
+
+            return run_batch_command(arguments, _job)
         else:
             from ibik_pin.demo import run_demo
 

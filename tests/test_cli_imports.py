@@ -12,9 +12,9 @@ import sys
 import pytest
 
 # Modules `ibik --help` must not load: plotting, the tracking pipeline and what it writes, the
-# demo's synthetic data, the paper's experiments.
+# demo's synthetic data, the paper's experiments, Dask.
 HEAVY_PREFIXES = ("matplotlib", "ibik_pin.synthetic", "ibik_pin.demo", "ibik_pin.tracking", "ibik_pin.viz",
-                  "experiments", "paper")
+                  "experiments", "paper", "dask", "distributed")
 
 
 def run_python(code: str) -> str:
@@ -26,7 +26,7 @@ def run_python(code: str) -> str:
     return completed.stdout.strip().splitlines()[-1]
 
 
-@pytest.mark.parametrize("command", [["--help"], ["track", "--help"], ["demo", "--help"]])
+@pytest.mark.parametrize("command", [["--help"], ["track", "--help"], ["batch", "--help"], ["demo", "--help"]])
 def test_help_loads_no_plotting_synthetic_data_tracking_or_experiment_code(command):
     code = (
         "import json, sys\n"
