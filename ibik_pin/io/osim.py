@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import os
 import xml.etree.ElementTree as ElementTree
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,6 +35,7 @@ from scipy.spatial.transform import Rotation
 
 from ibik_pin.exceptions import InputError
 from ibik_pin.io.files import write_text_atomically
+from ibik_pin.io.skeleton import joint_group_name
 from ibik_pin.model import BodyModel
 
 __all__ = ["OSIM_VERSION", "OsimBody", "osim_bodies", "write_osim_model"]
@@ -117,24 +119,12 @@ def osim_bodies(body: BodyModel) -> list[OsimBody]:
             body_of_joint[joint_id] = len(members) - 1
     names = [ROOT_BODY] if has_free_flyer else []
     for joint_ids in members[len(names):]:
-        name = _shared_prefix([model.names[j] for j in joint_ids]) or model.names[joint_ids[0]]
+        name = joint_group_name([model.names[j] for j in joint_ids]) or model.names[joint_ids[0]]
         unique, suffix = name, 2
         while unique in names or unique == "ground":
             unique, suffix = f"{name}_{suffix}", suffix + 1
         names.append(unique)
     return [OsimBody(name, tuple(ids), parent) for name, ids, parent in zip(names, members, parents, strict=True)]
-
-
-def _shared_prefix(joint_names: list[str]) -> str:
-    """The ``_``-separated tokens the names share, without a trailing axis letter or "joint"."""
-    shared: list[str] = []
-    for tokens in zip(*(name.split("_") for name in joint_names), strict=False):
-        if len(set(tokens)) != 1:
-            break
-        shared.append(tokens[0])
-    while shared and shared[-1] in {"X", "Y", "Z", "x", "y", "z", "joint"}:
-        shared.pop()
-    return "_".join(shared)
 
 
 def write_osim_model(path: str | os.PathLike[str], body: BodyModel, name: str = "ibik_pin_subject") -> None:
@@ -186,8 +176,8 @@ def write_osim_model(path: str | os.PathLike[str], body: BodyModel, name: str = 
     write_text_atomically(path, text)
 
 
-def _text(parent: ElementTree.Element, tag: str, text: str, **attributes: str) -> ElementTree.Element:
-    element = ElementTree.SubElement(parent, tag, **attributes)
+def _text(parent: ElementTree.Element, tag: str, text: str) -> ElementTree.Element:
+    element = ElementTree.SubElement(parent, tag)
     element.text = text
     return element
 
@@ -199,7 +189,7 @@ def _set(parent: ElementTree.Element, tag: str, name: str) -> ElementTree.Elemen
     return objects
 
 
-def _vector(values: np.ndarray | tuple[float, ...]) -> str:
+def _vector(values: np.ndarray | Sequence[float]) -> str:
     return " ".join(repr(float(value)) for value in values)
 
 
