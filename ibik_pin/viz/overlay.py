@@ -52,8 +52,8 @@ def write_overlay_video(
     masks: Iterable[np.ndarray] | None = None,
     skeleton_color: tuple[int, int, int] = (0, 255, 0),
     mask_color: tuple[int, int, int] = (0, 0, 255),
-    frame_numbers: Sequence[int] | None = None,
-    times: Sequence[float] | None = None,
+    frame_numbers: Sequence[int] | np.ndarray | None = None,
+    times: Sequence[float] | np.ndarray | None = None,
 ) -> int:
     """An MP4 video (H.264) of the projected skeleton over the images and silhouettes.
 
