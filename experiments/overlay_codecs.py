@@ -17,7 +17,6 @@ from pathlib import Path
 
 import av
 import cv2
-import numpy as np
 
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, read_calibration
 from ibik_pin.io.trc import read_trc
