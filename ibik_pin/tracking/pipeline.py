@@ -347,7 +347,8 @@ def write_overlays(folder: Path, job: TrackJob, body: BodyModel, cameras: list,
     times = np.asarray(trc.times, dtype=float)
     residuals = {"mean of the targets": result.target_residuals * 1000.0}
     residuals |= {name: result.target_distances[:, index] * 1000.0 for index, name in enumerate(result.target_names)}
-    panels = [Panel(residuals, "residual [mm]", "distance of each target keypoint to its target")]
+    panels = [Panel(residuals, "residual [mm]", "distance of each target keypoint to its target",
+                    highlight="mean of the targets")]
     if result.inside_fraction.shape == result.overlap.shape and result.overlap.shape[1] > 0:
         inside = {camera.name: result.inside_fraction[:, index] for index, camera in enumerate(cameras)}
         panels.append(Panel(inside, "inside the silhouette [0-1]", "fraction of the skeleton inside each view's "

@@ -29,12 +29,14 @@ class Panel:
         title: The title above the plot.
         ylim: The vertical axis range; None for matplotlib's, which starts at 0 when no value
             is negative (a residual or a fraction read from a zero baseline).
+        highlight: The label of a series drawn thick and black (a mean over the others), or None.
     """
 
     series: dict[str, np.ndarray]
     ylabel: str
     title: str
     ylim: tuple[float, float] | None = None
+    highlight: str | None = None
 
 
 def plot_series(
@@ -88,6 +90,7 @@ def plot_panels(
             values_by_label[label] = values
         checked.append((panel, values_by_label))
 
+    from matplotlib import colormaps
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -96,8 +99,14 @@ def plot_panels(
     FigureCanvasAgg(figure)
     for index, (panel, values_by_label) in enumerate(checked):
         axes = figure.add_subplot(len(panels), 1, index + 1)
-        for label, values in values_by_label.items():
-            axes.plot(times, values, label=label, linewidth=1.5)
+        # matplotlib's default cycle repeats after 10 colours; tab20 tells 20 targets apart.
+        count = len(values_by_label)
+        colors = [colormaps["tab20"](index % 20) if count > 10 else None for index in range(count)]
+        for (label, values), color in zip(values_by_label.items(), colors, strict=False):
+            if label == panel.highlight:
+                axes.plot(times, values, label=label, linewidth=2.5, color="black", zorder=3)
+            else:
+                axes.plot(times, values, label=label, linewidth=1.2, color=color)
         if panel.ylim is not None:
             axes.set_ylim(*panel.ylim)
         elif all(np.nanmin(v, initial=0.0) >= 0.0 for v in values_by_label.values()):
