@@ -64,8 +64,12 @@ def test_the_replay_runs_without_error_and_its_arrow_keys_work_after_clicking_pl
       var before = counter.textContent;
       document.activeElement.dispatchEvent(new KeyboardEvent("keydown", {key: "ArrowRight", bubbles: true}));
       var after = counter.textContent;
+      var follow = document.getElementById("follow"), reset = document.getElementById("reset");
+      follow.focus(); follow.click(); var focusAfterCheckbox = document.activeElement.tagName;
+      reset.focus(); reset.click(); var focusAfterReset = document.activeElement.tagName;
       document.getElementById("probe-result").textContent = JSON.stringify(
-        {errors: window.probeErrors, focus: focusAfterClick, before: before, after: after});
+        {errors: window.probeErrors, focus: focusAfterClick, before: before, after: after,
+         otherControls: [focusAfterCheckbox, focusAfterReset]});
     }, 500);
     </script>"""
     text = path.read_text(encoding="utf-8")
@@ -76,6 +80,7 @@ def test_the_replay_runs_without_error_and_its_arrow_keys_work_after_clicking_pl
 
     assert result["errors"] == []
     assert result["focus"] == "BODY"
+    assert result["otherControls"] == ["BODY", "BODY"]
     frame_before = int(re.search(r"frame (\d+)", result["before"]).group(1))
     frame_after = int(re.search(r"frame (\d+)", result["after"]).group(1))
     assert frame_after == frame_before % 12 + 1 or frame_after == min(frame_before + 1, 12)

@@ -273,7 +273,7 @@ function element(id) {
     textContent: id === "replay-data" ? json : "",
     classList: { add() {}, remove() {} },
     addEventListener(type, listener) { this.listeners[type] = listener; },
-    appendChild() {}, setPointerCapture() {}, getContext() { return context; },
+    appendChild() {}, setPointerCapture() {}, blur() {}, getContext() { return context; },
     getBoundingClientRect() { return { left: 0, top: 0, width: 800, height: 600 }; },
   };
 }
