@@ -27,8 +27,18 @@ HIP_TOLERANCE_M = 1e-6
 
 @pytest.fixture(scope="module")
 def outputs(tmp_path_factory):
+    """Scaled from the targets' own distances (no static trial)."""
     out = tmp_path_factory.mktemp("pose2sim") / "out"
     assert main(["track", "--targets", str(POSE2SIM_TRC), "--no-image", "--quiet", "--out", str(out)]) == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def calibrated_outputs(tmp_path_factory):
+    """A subject calibrated on the same frames as its static trial (keypoints placed off the joints)."""
+    out = tmp_path_factory.mktemp("pose2sim_calibrated") / "out"
+    assert main(["track", "--targets", str(POSE2SIM_TRC), "--static", str(POSE2SIM_TRC), "--no-image", "--quiet",
+                 "--out", str(out)]) == 0
     return out
 
 
@@ -86,8 +96,10 @@ def test_the_human_merges_each_ball_joint_into_one_opensim_body(human):
     assert bodies["right_knee"] == ["right_knee_Z"]
 
 
-def test_opensim_plays_model_osim_with_motion_mot_onto_joints_trc(outputs):
+@pytest.mark.parametrize("run", ["outputs", "calibrated_outputs"])
+def test_opensim_plays_model_osim_with_motion_mot_onto_joints_trc(run, request):
     opensim = pytest.importorskip("opensim", reason="OpenSim's Python package (pip install 'ibik_pin[opensim]')")
+    outputs = request.getfixturevalue(run)
     model = opensim.Model(str(outputs / "model.osim"))
     state = model.initSystem()
     motion = opensim.TimeSeriesTable(str(outputs / "motion.mot"))
