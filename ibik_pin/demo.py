@@ -73,6 +73,6 @@ def run_demo(out: Path, quiet: bool = False) -> dict:
         for variant, row in comparison.items():
             print(f"{variant.upper():<10}" + "".join(f"{row['joint_error_mm'][n]:9.1f}" for n in ESTIMATED)
                   + f"{row['mean_error_mm']:9.1f}")
-        print(f"wrote {out}/ibik and {out}/pik (joints.trc, q.csv, motion.mot, motion.bvh, report.json, "
+        print(f"wrote {out}/ibik and {out}/pik (joints.trc, q.csv, motion.mot, model.osim, motion.bvh, report.json, "
               f"overlays, replay.html) and {out}/comparison.json")
     return comparison

@@ -7,6 +7,8 @@ keypoint pairs are the segments projected into the images (eq. 5), and how thick
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import sys
 from dataclasses import dataclass, field
 from importlib import resources
@@ -292,3 +294,29 @@ def set_segment_length(model: pin.Model, joint_name: str, length: float) -> None
     placement = model.jointPlacements[joint_index].copy()
     placement.translation = offset * (length / norm)
     model.jointPlacements[joint_index] = placement
+
+
+def with_hip_at_hip_joints_midpoint(body: BodyModel) -> BodyModel:
+    """A copy of the body whose ``Hip`` keypoint is HALPE_26's: the midpoint of LHip and RHip.
+
+    The model's own ``Hip`` is its root, about 0.1 m above the hip joints; Pose2Sim's HALPE_26
+    (and its OpenSim model's ``Hip`` marker) is the LHip/RHip midpoint. The new Hip is fixed to the
+    root at that midpoint in the neutral pose (exactly the midpoint in every pose when LHip and
+    RHip move with the root, as they do on this project's human, scaled or calibrated).
+
+    Raises:
+        UnknownNameError: The body lacks a Hip, LHip or RHip keypoint.
+    """
+    model = copy.deepcopy(body.model)
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, pin.neutral(model))
+    root = pin.SE3(data.oMi[1]) if model.njoints > 1 else pin.SE3.Identity()
+    hips = [data.oMf[body.frame_id(name)].translation for name in ("LHip", "RHip")]
+    hip_id = body.frame_id("Hip")
+    frame = model.frames[hip_id]
+    frame.parentJoint = 1 if model.njoints > 1 else 0
+    frame.parentFrame = model.getFrameId(model.names[frame.parentJoint])
+    frame.placement = pin.SE3(np.eye(3), root.actInv(0.5 * (hips[0] + hips[1])))
+    model.frames[hip_id] = frame
+    return dataclasses.replace(body, model=model, keypoints=dict(body.keypoints), segments=list(body.segments),
+                               end_effectors=list(body.end_effectors))

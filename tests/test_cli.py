@@ -21,7 +21,7 @@ from ibik_pin.io.calibration import read_calibration, write_calibration
 from ibik_pin.io.mot import read_mot
 from ibik_pin.io.trc import read_trc, write_trc
 
-OUTPUTS = ["joints.trc", "q.csv", "motion.mot", "motion.bvh", "report.json"]
+OUTPUTS = ["joints.trc", "q.csv", "motion.mot", "motion.bvh", "model.osim", "report.json"]
 OVERLAYS = ["residuals.png", "replay.html", "overlay_cam1.mp4", "overlay_cam2.mp4"]
 
 

@@ -11,6 +11,7 @@ from ibik_pin.io.bvh import read_bvh
 from ibik_pin.io.export import (
     bvh_joint_groups,
     q_column_names,
+    q_column_units,
     write_model_bvh,
     write_model_mot,
     write_q_csv,
@@ -93,7 +94,11 @@ def test_csv_read_back_with_loadtxt_gives_the_exact_times_and_configurations(
 
     header = path.read_text().splitlines()[0].split(",")
     table = np.loadtxt(path, delimiter=",", skiprows=1)
-    assert header == ["time", *q_column_names(human.model)]
+    units = q_column_units(human.model)
+    assert header == ["time [s]", *[f"{n} [{u}]" for n, u in zip(q_column_names(human.model), units, strict=True)]]
+    assert header[1:8] == ["root_tx [m]", "root_ty [m]", "root_tz [m]", "root_qx [1]", "root_qy [1]", "root_qz [1]",
+                           "root_qw [1]"]
+    assert set(units[7:]) == {"rad"}
     np.testing.assert_array_equal(table[:, 0], times)
     np.testing.assert_array_equal(table[:, 1:], q)
 

@@ -10,7 +10,7 @@ import matplotlib
 import numpy as np
 import pytest
 
-from ibik_pin.exceptions import FileFormatError, InputError
+from ibik_pin.exceptions import InputError
 from ibik_pin.viz.overlay import write_overlay_video
 from ibik_pin.viz.plots import plot_series
 from ibik_pin.viz.replay import write_html_replay
@@ -156,12 +156,13 @@ def test_overlay_video_refuses_a_frame_of_another_size(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
-def test_overlay_video_raises_a_file_format_error_when_the_writer_cannot_open(tmp_path):
+def test_overlay_video_into_a_missing_folder_raises_an_input_error_and_leaves_nothing(tmp_path):
     width, height = VIDEO_SIZE
     frames = [np.zeros((height, width, 3), np.uint8)]
 
-    with pytest.raises(FileFormatError, match="cannot open an mp4v video writer"):
+    with pytest.raises(InputError, match=r"missing/x.mp4: cannot write: .*No such file or directory"):
         write_overlay_video(tmp_path / "missing" / "x.mp4", frames, diagonal_skeletons(1), 25.0)
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_overlay_video_needs_images_or_masks(tmp_path):
@@ -272,7 +273,7 @@ function element(id) {
     textContent: id === "replay-data" ? json : "",
     classList: { add() {}, remove() {} },
     addEventListener(type, listener) { this.listeners[type] = listener; },
-    appendChild() {}, setPointerCapture() {}, getContext() { return context; },
+    appendChild() {}, setPointerCapture() {}, blur() {}, getContext() { return context; },
     getBoundingClientRect() { return { left: 0, top: 0, width: 800, height: 600 }; },
   };
 }
@@ -343,3 +344,38 @@ def test_html_replay_script_draws_and_handles_every_control_without_error(walk, 
     assert re.fullmatch(r"frame \d+ / 10 \u00b7 \d+\.\d{3} s", result["counter"])
     assert result["calls"]["stroke"] > 0 and result["calls"]["arc"] > 0
     assert result["calls"]["fillText"] >= len(KEYPOINTS)  # names shown
+
+
+def test_overlay_video_is_h264_yuv420p_that_decodes_to_every_frame(tmp_path):
+    import av
+
+    width, height = 161, 121  # odd: yuv420p needs even sizes, the writer pads one black column and row
+    frames = [np.full((height, width, 3), 90, np.uint8)] * 4
+    path = tmp_path / "overlay.mp4"
+
+    write_overlay_video(path, frames, diagonal_skeletons(4), FRAME_RATE, frame_numbers=[7, 8, 9, 10])
+
+    with av.open(str(path)) as container:
+        stream = container.streams.video[0]
+        assert stream.codec_context.name == "h264"
+        assert stream.codec_context.pix_fmt == "yuv420p"
+        assert (stream.codec_context.width, stream.codec_context.height) == (162, 122)
+        decoded = [frame.to_ndarray(format="bgr24") for frame in container.decode(stream)]
+    assert len(decoded) == 4
+    assert float(stream.average_rate) == pytest.approx(FRAME_RATE)
+    np.testing.assert_allclose(decoded[0][100, 20].astype(int), 90, atol=VIDEO_COLOUR_TOLERANCE)
+
+
+def test_overlay_video_shows_the_frame_number_and_legend_in_the_top_left_corner(tmp_path):
+    width, height = 320, 240
+    frames = [np.full((height, width, 3), 90, np.uint8)] * 2
+    path = tmp_path / "overlay.mp4"
+    no_segment = [(np.empty((0, 2)), np.empty((0, 2)))] * 2
+
+    write_overlay_video(path, frames, no_segment, FRAME_RATE, masks=[np.zeros((height, width), bool)] * 2)
+
+    video = video_frames(path).astype(int)
+    corner, rest = video[:, :40, :120], video[:, 120:, 160:]
+    assert (corner.max(axis=-1) > 200).mean() > 0.02  # white caption text and coloured legend lines
+    assert (corner.max(axis=-1) < 40).mean() > 0.3  # on dark boxes
+    np.testing.assert_allclose(rest, 90, atol=VIDEO_COLOUR_TOLERANCE)

@@ -26,6 +26,7 @@ def tracking_result() -> TrackingResult:
         keypoints=np.zeros((3, 2, 3)),
         target_residuals=np.nanmean(distances, axis=1),
         overlap=np.array([[0.9], [0.8], [np.nan]]),
+        inside_fraction=np.array([[1.0], [0.75], [np.nan]]),
         limit_hits=[[], ["right_elbow_Z"], []],
         dropped_targets=[[], ["RWrist"], []],
         disabled_views=[[], [], ["cam1"]],
@@ -115,3 +116,17 @@ def test_levels_merged_by_the_scheme_are_reported_by_number():
     report = SolverLevelsReport.from_result(result)
     assert report.levels == ["level 1"]
     assert report.status_per_frame == {"level 1": ["solved", "solved"]}
+
+
+def test_report_json_names_the_unit_of_every_figure_and_a_0_1_overlap(report):
+    written = json.loads(report.to_json(), parse_constant=refuse_constant)
+
+    figures = [key for key, value in written.items()
+               if key not in ("units", "trc_axes", "solver_levels") and not isinstance(value, (str, bool))
+               and key not in ("cameras", "frames", "joint_limit_hits", "frames_with_dropped_targets",
+                               "frames_with_disabled_views")]
+    assert sorted(key for key in figures if key not in written["units"]) == []
+    assert "px" in written["units"]["overlap_per_view"] and "not a 0-1 overlap" in written["units"]["overlap_per_view"]
+    assert written["inside_fraction_per_view"] == {"cam1": [1.0, 0.75, None]}
+    assert written["solve_seconds"] == 0.5
+    assert written["frame_numbers"] == [1, 2, 3] and written["joint_limit_hits"] == {"2": ["right_elbow_Z"]}

@@ -23,7 +23,7 @@ from ibik_pin.exceptions import InputError
 from ibik_pin.io.bvh_writer import write_bvh
 from ibik_pin.io.files import write_text_atomically
 from ibik_pin.io.mot import write_mot
-from ibik_pin.io.skeleton import euler_angles
+from ibik_pin.io.skeleton import euler_angles, joint_group_name
 from ibik_pin.model import BodyModel
 
 __all__ = [
@@ -31,6 +31,7 @@ __all__ = [
     "ROOT_EULER_AXES",
     "bvh_joint_groups",
     "q_column_names",
+    "q_column_units",
     "write_model_bvh",
     "write_model_mot",
     "write_q_csv",
@@ -57,8 +58,6 @@ _REVOLUTE_UNBOUNDED = {
     "JointModelRevoluteUnboundedUnaligned",
 }
 _PRISMATIC = {"JointModelPX", "JointModelPY", "JointModelPZ", "JointModelPrismaticUnaligned"}
-# Tokens dropped from the end of a BVH joint name: the axis of a single joint ("_X"), "_joint".
-_NAME_SUFFIXES = {"X", "Y", "Z", "x", "y", "z", "joint"}
 # A joint placed closer than this to its parent shares its origin [m].
 _SAME_ORIGIN_TOLERANCE = 1e-9
 # A free-flyer quaternion whose norm is farther than this from 1 is an error, not rounding.
@@ -112,10 +111,21 @@ def q_column_names(model: pin.Model) -> list[str]:
     return names
 
 
+def q_column_units(model: pin.Model) -> list[str]:
+    """The unit of each :func:`q_column_names` column: ``m`` for positions, ``1`` for the root's
+    quaternion and an unbounded joint's (cos, sin), ``rad`` for revolute, ``m`` for prismatic joints."""
+    per_kind = {"free_flyer": ["m"] * 3 + ["1"] * 4, "revolute_unbounded": ["1", "1"], "revolute": ["rad"],
+                "prismatic": ["m"]}
+    return [unit for joint_id in range(1, model.njoints) for unit in per_kind[_joint_kind(model, joint_id)]]
+
+
 def write_q_csv(
     path: str | os.PathLike[str], model: pin.Model, times: np.ndarray, q: np.ndarray
 ) -> None:
-    """Write configurations as CSV: header ``time,<q_column_names>``, one row per frame.
+    """Write configurations as CSV: header ``time [s],<name> [<unit>],...``, one row per frame.
+
+    The header holds each column's :func:`q_column_names` name and :func:`q_column_units` unit
+    (``root_tx [m]``, ``root_qw [1]``, ``left_hip_Z [rad]``).
 
     Values are written at full precision (shortest round-trip decimal), times [s], angles [rad],
     lengths [m]; ``np.loadtxt(path, delimiter=",", skiprows=1)`` gives back the exact numbers.
@@ -130,7 +140,8 @@ def write_q_csv(
     """
     times, q = _check_motion(model, times, q, normalise=False)  # written as given
     table = np.column_stack([times, q])
-    lines = [",".join(["time", *q_column_names(model)])]
+    header = [f"{name} [{unit}]" for name, unit in zip(q_column_names(model), q_column_units(model), strict=True)]
+    lines = [",".join(["time [s]", *header])]
     lines += [",".join(map(repr, row)) for row in table.tolist()]
     write_text_atomically(path, "\n".join(lines) + "\n")
 
@@ -230,7 +241,7 @@ def bvh_joint_groups(model: pin.Model) -> list[BvhJointGroup]:
     names = ["root"]
     for joint_ids in members[1:]:
         first_name = model.names[joint_ids[0]]
-        name = _group_name([model.names[joint_id] for joint_id in joint_ids]) or first_name
+        name = joint_group_name([model.names[joint_id] for joint_id in joint_ids]) or first_name
         if name in names:
             name = first_name
         unique_name, suffix = name, 2
@@ -328,18 +339,6 @@ def _end_sites(body: BodyModel, groups: list[BvhJointGroup]) -> dict[int, np.nda
         if offsets:
             end_sites[index] = np.array(max(offsets, key=np.linalg.norm))
     return end_sites
-
-
-def _group_name(joint_names: list[str]) -> str:
-    """The ``_``-separated tokens the names share, without a trailing axis letter or "joint"."""
-    shared: list[str] = []
-    for tokens in zip(*(name.split("_") for name in joint_names), strict=False):
-        if len(set(tokens)) != 1:
-            break
-        shared.append(tokens[0])
-    while shared and shared[-1] in _NAME_SUFFIXES:
-        shared.pop()
-    return "_".join(shared)
 
 
 def _joint_kind(model: pin.Model, joint_id: int) -> str:

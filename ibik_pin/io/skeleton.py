@@ -18,7 +18,23 @@ from ibik_pin.exceptions import (
     UnknownNameError,
 )
 
-__all__ = ["SkeletonMotion", "axis_rotations", "euler_angles"]
+__all__ = ["SkeletonMotion", "axis_rotations", "euler_angles", "joint_group_name"]
+
+# Tokens dropped from the end of a joint group's name: the axis of a single joint ("_X"), "_joint".
+_NAME_SUFFIXES = {"X", "Y", "Z", "x", "y", "z", "joint"}
+
+
+def joint_group_name(joint_names: list[str]) -> str:
+    """The ``_``-separated tokens the names share, without a trailing axis letter or "joint"
+    (``left_hip_Z, left_hip_X`` -> ``left_hip``): the name of a BVH joint or an OpenSim body."""
+    shared: list[str] = []
+    for tokens in zip(*(name.split("_") for name in joint_names), strict=False):
+        if len(set(tokens)) != 1:
+            break
+        shared.append(tokens[0])
+    while shared and shared[-1] in _NAME_SUFFIXES:
+        shared.pop()
+    return "_".join(shared)
 
 
 def axis_rotations(angles: np.ndarray, axes: str) -> np.ndarray:

@@ -19,13 +19,15 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import FileFormatError, IbikWarning, InputError
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, read_calibration
 from ibik_pin.io.export import write_model_bvh, write_model_mot, write_q_csv
 from ibik_pin.io.masks import IMAGE_SUFFIXES, list_mask_files, read_mask
+from ibik_pin.io.osim import write_osim_model
 from ibik_pin.io.trc import METRES_PER_UNIT, TrcData, read_trc, write_trc
 from ibik_pin.io.video import VideoReader
-from ibik_pin.model import BodyModel, load_human
+from ibik_pin.model import BodyModel, load_human, with_hip_at_hip_joints_midpoint
 from ibik_pin.subject.scaling import (
     FOOT_KEYPOINTS,
     scale_from_stature,
@@ -38,7 +40,7 @@ from ibik_pin.tracking.tracker import Tracker, TrackingResult, TrackingSettings
 from ibik_pin.vision.camera import cameras_in_frame, select_cameras
 from ibik_pin.vision.segmentation import silhouettes_from_video
 from ibik_pin.viz.overlay import write_overlay_video
-from ibik_pin.viz.plots import plot_series
+from ibik_pin.viz.plots import Panel, plot_panels
 from ibik_pin.viz.replay import write_html_replay
 
 VIDEO_SUFFIXES = {".mp4", ".avi", ".mov", ".mkv", ".m4v"}
@@ -305,8 +307,16 @@ def _replace_folder(staging: Path, out: Path) -> None:
 
 def write_outputs(folder: Path, job: TrackJob, trc: TrcData, body: BodyModel, cameras: list,
                   silhouettes: Silhouettes | None, result: TrackingResult, axes: AxesChoice) -> TrackingReport:
-    """joints.trc (in the TRC's own axis convention), q.csv, motion.mot, motion.bvh (model frame,
-    Y up), report.json (and the overlays) into `folder`."""
+    """joints.trc (in the TRC's own axis convention), q.csv, motion.mot, motion.bvh, model.osim
+    (model frame, Y up), report.json (and the overlays) into `folder`.
+
+    Without a Hip target, the written Hip is HALPE_26's (Pose2Sim's): the midpoint of the hip
+    joints, not the model's root above it (model.with_hip_at_hip_joints_midpoint)."""
+    if "Hip" not in trc.marker_names and "Hip" in body.keypoints:
+        body = with_hip_at_hip_joints_midpoint(body)
+        hip = result.keypoint_names.index("Hip")
+        hip_frame = body.frame_ids(["Hip"])
+        result.keypoints[:, hip] = [Configuration(body.model, q).frame_positions(hip_frame)[0] for q in result.q]
     times = np.asarray(trc.times, dtype=float)
     frame_rate = float(trc.data_rate)
     keypoints = OUTPUT_KEYPOINTS + [n for n in result.keypoint_names if n not in OUTPUT_KEYPOINTS]
@@ -319,23 +329,31 @@ def write_outputs(folder: Path, job: TrackJob, trc: TrcData, body: BodyModel, ca
     write_q_csv(folder / "q.csv", body.model, times, result.q)
     write_model_mot(folder / "motion.mot", body.model, times, result.q)
     write_model_bvh(folder / "motion.bvh", body, result.q, 1.0 / frame_rate)
+    write_osim_model(folder / "model.osim", body, name=f"ibik_pin_{job.targets.stem}")
     report = TrackingReport.from_tracking(
         result, job.settings, [camera.name for camera in cameras] if job.settings.use_image else [],
         trc.frame_numbers, times, frame_rate, axes,
     )
     report.write(folder / "report.json")
     if job.overlay:
-        write_overlays(folder, job, body, cameras, silhouettes, result, times, frame_rate)
+        write_overlays(folder, job, body, cameras, silhouettes, result, trc, frame_rate)
     return report
 
 
 def write_overlays(folder: Path, job: TrackJob, body: BodyModel, cameras: list,
-                   silhouettes: Silhouettes | None, result: TrackingResult, times: np.ndarray,
+                   silhouettes: Silhouettes | None, result: TrackingResult, trc: TrcData,
                    frame_rate: float) -> None:
     """Per camera an MP4 of the projected skeleton, a residual plot and an HTML 3D replay."""
-    plot_series(folder / "residuals.png", times,
-                {"mean end-effector residual": result.target_residuals * 1000.0},
-                ylabel="residual [mm]", title="end-effector residual per frame")
+    times = np.asarray(trc.times, dtype=float)
+    residuals = {"mean of the targets": result.target_residuals * 1000.0}
+    residuals |= {name: result.target_distances[:, index] * 1000.0 for index, name in enumerate(result.target_names)}
+    panels = [Panel(residuals, "residual [mm]", "distance of each target keypoint to its target",
+                    highlight="mean of the targets")]
+    if result.inside_fraction.shape == result.overlap.shape and result.overlap.shape[1] > 0:
+        inside = {camera.name: result.inside_fraction[:, index] for index, camera in enumerate(cameras)}
+        panels.append(Panel(inside, "inside the silhouette [0-1]", "fraction of the skeleton inside each view's "
+                            "silhouette", ylim=(0.0, 1.02)))
+    plot_panels(folder / "residuals.png", times, panels)
     segment_indices = [(result.keypoint_names.index(a), result.keypoint_names.index(b))
                        for a, b in body.segments]
     write_html_replay(folder / "replay.html", result.keypoint_names, segment_indices,
@@ -354,7 +372,7 @@ def write_overlays(folder: Path, job: TrackJob, body: BodyModel, cameras: list,
         masks = (silhouettes.mask(f, index) for f in range(len(times))) if silhouettes else None
         try:
             write_overlay_video(folder / f"overlay_{camera.name}.mp4", frames, skeletons,
-                                frame_rate, masks=masks)
+                                frame_rate, masks=masks, frame_numbers=trc.frame_numbers, times=times)
         finally:
             if reader is not None:
                 reader.close()

@@ -28,6 +28,28 @@ FRAME_NUMBERING = (
 )
 
 
+#: report.json's "units": the unit and meaning of every figure the report holds.
+UNITS = {
+    "frame_numbers": "the TRC's Frame# (counted from 1, as the TRC counts); keys of the frame dictionaries too",
+    "frame_rate_hz": "Hz: the targets TRC's DataRate",
+    "times_s": "s: the targets TRC's Time column",
+    "solve_seconds": "s: wall time of the solves alone (no reading or writing)",
+    "solve_frames_per_second": "frames per second of solve_seconds",
+    "iterations_per_frame": "solver steps per frame after the first",
+    "mask_filter_radius": "frames on each side of the temporal majority filter",
+    "end_effector_residual_m": "m: per frame, the mean distance of the present targets to the model's keypoints",
+    "keypoint_residual_m": "m: per target keypoint, the distance of the model's keypoint to its target",
+    "overlap_per_view": ("px: the paper's image criterion h (eq. 5-6) at each frame's solution, the mean over "
+                         "the skeleton's sample points of the silhouette's capped signed distance (positive "
+                         "inside, capped at about a limb's half-width; negative outside); higher is better; "
+                         "not a 0-1 overlap: see inside_fraction_per_view"),
+    "inside_fraction_per_view": "0-1: the fraction of the skeleton's sample points that project inside the silhouette",
+    "trc_axes.inside_images": "0-1",
+    "trc_axes.inside_silhouettes": "0-1",
+    "trc_axes.upright_cosine": "-1 to 1",
+}
+
+
 def _finite_or_none(value: float | np.floating) -> float | None:
     value = float(value)
     return value if math.isfinite(value) else None
@@ -165,12 +187,16 @@ class TrackingReport:
         end_effector_residual_m: per frame, the mean distance of the present targets to their
             keypoints, and its statistics over the frames [m].
         keypoint_residual_m: per target keypoint, its distance to its target [m].
-        overlap_per_view: per camera, the image criterion at each frame's solution (None when
-            the view was disabled).
+        overlap_per_view: per camera, the image criterion at each frame's solution [px] (None when
+            the view was disabled): a mean capped signed distance, see :data:`UNITS`.
         joint_limit_hits: TRC frame number -> joints at a limit (frames without any omitted).
         frames_with_dropped_targets: TRC frame number -> targets absent in that frame.
         frames_with_disabled_views: TRC frame number -> cameras whose silhouette was empty.
         solver_levels: per priority level, the solver's status at each frame.
+        inside_fraction_per_view: per camera, the fraction of the skeleton inside the silhouette
+            at each frame [0-1] (None when the view was disabled).
+        solve_seconds: wall time of the solves [s].
+        units: :data:`UNITS`, written into the file so that it describes itself.
     """
 
     frames: int
@@ -193,6 +219,9 @@ class TrackingReport:
     frames_with_dropped_targets: dict[str, list[str]]
     frames_with_disabled_views: dict[str, list[str]]
     solver_levels: SolverLevelsReport = field(default_factory=SolverLevelsReport)
+    inside_fraction_per_view: dict[str, list[float | None]] = field(default_factory=dict)
+    solve_seconds: float | None = None
+    units: dict[str, str] = field(default_factory=lambda: dict(UNITS))
 
     @classmethod
     def from_tracking(
@@ -244,6 +273,10 @@ class TrackingReport:
             frames_with_dropped_targets=by_frame(result.dropped_targets),
             frames_with_disabled_views=by_frame(result.disabled_views),
             solver_levels=SolverLevelsReport.from_result(result),
+            inside_fraction_per_view={name: [_finite_or_none(value) for value in result.inside_fraction[:, index]]
+                                      for index, name in enumerate(camera_names)
+                                      if result.inside_fraction.shape == result.overlap.shape},
+            solve_seconds=_finite_or_none(result.solve_seconds),
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -302,4 +335,4 @@ def _json_ready(value: Any) -> Any:
     return value
 
 
-__all__ = ["FRAME_NUMBERING", "ResidualStats", "SolverLevelsReport", "TrackingReport", "TrcAxesReport"]
+__all__ = ["FRAME_NUMBERING", "UNITS", "ResidualStats", "SolverLevelsReport", "TrackingReport", "TrcAxesReport"]

@@ -118,7 +118,10 @@ class TrackingResult:
         target_names: the T target keypoints, in the order of the targets given to track().
         target_distances: (F, T) distance of each target keypoint of the model to its target [m],
             NaN where the target is absent that frame.
-        overlap: (F, V) the criterion of each view at the solution (NaN where disabled).
+        overlap: (F, V) the criterion of each view at the solution (NaN where disabled): the mean
+            over the skeleton's sample points of the capped signed-distance support [px].
+        inside_fraction: (F, V) the fraction of those sample points that project inside the
+            silhouette (support > 0) [0-1], NaN where disabled.
         limit_hits: per frame, the joints at a limit.
         dropped_targets: per frame, the targets absent (NaN) in that frame.
         disabled_views: per frame, the cameras whose silhouette was empty.
@@ -145,6 +148,7 @@ class TrackingResult:
     target_distances: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     level_names: list[str] = field(default_factory=list)
     level_reports: list[list[LevelReport]] = field(default_factory=list)
+    inside_fraction: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
     @property
     def frames_per_second(self) -> float:
@@ -336,6 +340,7 @@ class Tracker:
             target_names=list(names),
             target_distances=np.full((frame_count, len(names)), np.nan),
             overlap=np.full((frame_count, len(self.cameras)), np.nan),
+            inside_fraction=np.full((frame_count, len(self.cameras)), np.nan),
             level_names=self._level_names(),
         )
         configuration = Configuration(self.body.model, initial_configuration(self.body, names, targets[0]))
@@ -377,19 +382,21 @@ class Tracker:
             errors = result.target_distances[frame, present]
             result.target_residuals[frame] = np.mean(errors) if errors.size else np.nan
             if use_image:
-                result.overlap[frame] = self._overlap_per_view(configuration, disabled)
+                result.overlap[frame], result.inside_fraction[frame] = self._overlap_per_view(configuration, disabled)
             result.limit_hits.append(self.limits.at_limit(configuration.q))
             if progress is not None:
                 progress()
         return result
 
-    def _overlap_per_view(self, configuration: Configuration, disabled: list[str]) -> np.ndarray:
+    def _overlap_per_view(self, configuration: Configuration, disabled: list[str]) -> tuple[np.ndarray, np.ndarray]:
+        """Per view, the mean support at the skeleton's sample points [px] and the fraction inside [0-1]."""
         points = self.image_task.sample_points(configuration)
         overlap = np.full(len(self.cameras), np.nan)
+        inside = np.full(len(self.cameras), np.nan)
         for index, view in enumerate(self.image_task.views):
             if view.camera.name in disabled:
                 continue
-            pixels = view.camera.project(points)
-            overlap[index] = float(np.mean(view.support.sample(pixels).values))
-        return overlap
+            values = view.support.sample(view.camera.project(points)).values
+            overlap[index], inside[index] = float(np.mean(values)), float(np.mean(values > 0.0))
+        return overlap, inside
 

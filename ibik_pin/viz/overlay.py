@@ -1,17 +1,25 @@
-"""Overlay videos: the estimated skeleton drawn over each camera's silhouettes (MP4).
+"""Overlay videos: the estimated skeleton drawn over each camera's silhouettes (MP4, H.264).
 
-One video per camera, written frame by frame (a long sequence is never held in memory) with
-OpenCV's ``mp4v`` codec, atomically: the image or the silhouette as background, the silhouette
-blended in colour, the projected skeleton on top.
+One video per camera, written frame by frame (a long sequence is never held in memory) and
+atomically: the image or the silhouette as background, the silhouette blended in colour, the
+projected skeleton on top, the frame number and time in the top-left corner and a legend below it.
+
+The video is H.264 (libx264, ``yuv420p``, ``+faststart``) in MP4, what browsers play: OpenCV's
+wheels encode only ``mp4v``, which Chromium refuses (``MEDIA_ERR_SRC_NOT_SUPPORTED``), so the
+frames go through PyAV, whose wheels ship FFmpeg with libx264. ``yuv420p`` needs an even width and
+height: an odd frame gets one black column or row.
 """
 
 from __future__ import annotations
 
 import itertools
 import os
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
+from fractions import Fraction
 from pathlib import Path
+from typing import Any
 
+import av
 import cv2
 import numpy as np
 
@@ -19,10 +27,20 @@ from ibik_pin.exceptions import FileFormatError, InputError
 from ibik_pin.io.files import write_atomically
 from ibik_pin.viz.drawing import draw_skeleton, overlay_mask
 
-__all__ = ["write_overlay_video"]
+__all__ = ["VIDEO_CODEC", "write_overlay_video"]
 
+#: The codec and pixel format of the overlays (what browsers decode).
+VIDEO_CODEC = "h264"
+VIDEO_PIXEL_FORMAT = "yuv420p"
+# x264's constant rate factor: 23 is its default, visually clean for drawn lines on video.
+_CRF = "23"
+# x264 preset: "veryfast" encoded the Pose2Sim demo 3x faster than x264's default "medium", and smaller
+# (0.59 against 0.68 MB; experiments/overlay_codecs.py, README).
+_PRESET = "veryfast"
 # Mask pixels drawn as the background when there is no image: grey level (0-255).
 _MASK_GREY = 150
+# Caption text: white on a dark box, its height a fraction of the frame's (at least 9 px).
+_TEXT_HEIGHT_FRACTION = 0.022
 
 
 # Stands for the item of an input that ended before the others.
@@ -37,8 +55,10 @@ def write_overlay_video(
     masks: Iterable[np.ndarray] | None = None,
     skeleton_color: tuple[int, int, int] = (0, 255, 0),
     mask_color: tuple[int, int, int] = (0, 0, 255),
+    frame_numbers: Sequence[int] | np.ndarray | None = None,
+    times: Sequence[float] | np.ndarray | None = None,
 ) -> int:
-    """An MP4 video (``mp4v``) of the projected skeleton over the images and silhouettes.
+    """An MP4 video (H.264) of the projected skeleton over the images and silhouettes.
 
     Each video frame is the image, with the silhouette mask blended over it in ``mask_color``
     if masks are given, and the skeleton drawn with :func:`~ibik_pin.viz.drawing.draw_skeleton`.
@@ -55,6 +75,8 @@ def write_overlay_video(
         masks: Per frame, the (H, W) silhouette (bool, or non-zero = inside); or None.
         skeleton_color: BGR colour of the skeleton.
         mask_color: BGR colour blended over the silhouette (opacity 0.4).
+        frame_numbers: The number shown for each frame (e.g. the TRC's Frame#); 1, 2, ... if None.
+        times: The time shown for each frame [s]; frame index / fps if None.
 
     Returns:
         The number of frames written.
@@ -62,7 +84,8 @@ def write_overlay_video(
     Raises:
         InputError: Neither images nor masks, no frame, a frame of another size or kind, the
             inputs of different lengths, or ``fps`` not positive.
-        FileFormatError: OpenCV cannot open a video writer for ``path``.
+        InputError: also when the file cannot be written (missing folder, permissions, full disk).
+        FileFormatError: FFmpeg cannot open an H.264 video for ``path``.
     """
     if not np.isfinite(fps) or fps <= 0.0:
         raise InputError(f"fps: expected a positive number [Hz], got {fps}")
@@ -70,6 +93,12 @@ def write_overlay_video(
         raise InputError("frames_bgr, masks: expected images, masks or both, got neither")
     given: dict[str, Iterable[object] | None] = {"skeletons": skeletons, "frames_bgr": frames_bgr, "masks": masks}
     sources = {name: iter(source) for name, source in given.items() if source is not None}
+    legend = [("estimated skeleton", skeleton_color)] + ([("silhouette", mask_color)] if masks is not None else [])
+
+    def caption(index: int) -> str:
+        number = frame_numbers[index] if frame_numbers is not None and index < len(frame_numbers) else index + 1
+        time = times[index] if times is not None and index < len(times) else index / fps
+        return f"frame {number}  t = {time:.3f} s"
 
     def write(temporary: Path) -> int:
         writer = None
@@ -85,9 +114,10 @@ def write_overlay_video(
                         f"{', '.join(longer)} went on: expected as many frames in each"
                     )
                 image = _overlay_frame(index, item, skeleton_color, mask_color)
+                image = _draw_captions(image, caption(index), legend)
                 if writer is None:
                     size = (image.shape[1], image.shape[0])
-                    writer = _open_video_writer(temporary, path, fps, size)
+                    writer = _H264Writer(temporary, path, fps, size)
                 elif (image.shape[1], image.shape[0]) != size:
                     raise InputError(
                         f"frame {index}: expected {size[0]} x {size[1]} px like frame 0, got "
@@ -98,10 +128,11 @@ def write_overlay_video(
                 raise InputError(
                     f"{', '.join(sources)}: expected at least one frame, got none"
                 )
+            writer.finish()
             return index + 1
         finally:
             if writer is not None:
-                writer.release()
+                writer.close()
 
     return write_atomically(path, write)
 
@@ -150,17 +181,55 @@ def _overlay_frame(
     return draw_skeleton(image, skeleton[0], skeleton[1], color=skeleton_color)
 
 
-def _open_video_writer(
-    temporary: Path, path: str | os.PathLike[str], fps: float, size: tuple[int, int]
-) -> cv2.VideoWriter:
-    try:
-        writer = cv2.VideoWriter(str(temporary), cv2.VideoWriter.fourcc(*"mp4v"), float(fps), size)
-    except cv2.error as error:
-        raise FileFormatError(f"{path}: OpenCV cannot write an mp4v video: {error}") from None
-    if not writer.isOpened():
-        writer.release()
-        raise FileFormatError(
-            f"{path}: OpenCV cannot open an mp4v video writer ({size[0]} x {size[1]} px at "
-            f"{fps} fps); check the folder exists and is writable"
-        )
-    return writer
+def _draw_captions(image: np.ndarray, caption: str, legend: list[tuple[str, tuple[int, int, int]]]) -> np.ndarray:
+    """The frame with its caption (frame number, time) and the legend, top left, on dark boxes."""
+    height = image.shape[0]
+    font = cv2.FONT_HERSHEY_SIMPLEX
+    text_px = max(9.0, _TEXT_HEIGHT_FRACTION * height)
+    scale = text_px / 22.0  # FONT_HERSHEY_SIMPLEX at scale 1 is about 22 px tall
+    thickness = max(1, round(text_px / 12.0))
+    margin = max(2, round(text_px / 3.0))
+    lines = [(caption, (255, 255, 255))] + [(f"-- {label}", color) for label, color in legend]
+    y = margin
+    for text, color in lines:
+        (width, text_height), baseline = cv2.getTextSize(text, font, scale, thickness)
+        cv2.rectangle(image, (0, y), (width + 2 * margin, y + text_height + baseline + margin), (0, 0, 0), -1)
+        cv2.putText(image, text, (margin, y + text_height + margin // 2), font, scale, color, thickness, cv2.LINE_AA)
+        y += text_height + baseline + margin
+    return image
+
+
+class _H264Writer:
+    """Frames (H, W, 3) BGR uint8 in, an H.264 MP4 out (PyAV); padded to even sizes."""
+
+    def __init__(self, temporary: Path, path: str | os.PathLike[str], fps: float, size: tuple[int, int]):
+        self.size = size
+        self.even_size = (size[0] + size[0] % 2, size[1] + size[1] % 2)
+        try:
+            self.container: Any = av.open(str(temporary), mode="w", format="mp4",
+                                          options={"movflags": "+faststart"})
+        except av.FFmpegError as error:
+            if isinstance(error, OSError):
+                raise  # write_atomically reports it as a file that cannot be written
+            raise FileFormatError(
+                f"{path}: FFmpeg cannot open an H.264 video ({size[0]} x {size[1]} px at {fps} fps): {error}"
+            ) from None
+        self.stream = self.container.add_stream("libx264", rate=Fraction(fps).limit_denominator(1001))
+        self.stream.width, self.stream.height = self.even_size
+        self.stream.pix_fmt = VIDEO_PIXEL_FORMAT
+        self.stream.options = {"crf": _CRF, "preset": _PRESET}
+
+    def write(self, image: np.ndarray) -> None:
+        if self.even_size != self.size:
+            padded = np.zeros((self.even_size[1], self.even_size[0], 3), np.uint8)
+            padded[: image.shape[0], : image.shape[1]] = image
+            image = padded
+        frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(image), format="bgr24")
+        self.container.mux(self.stream.encode(frame))
+
+    def finish(self) -> None:
+        self.container.mux(self.stream.encode(None))  # flush the encoder's delayed frames
+
+    def close(self) -> None:
+        self.container.close()
+

@@ -8,13 +8,35 @@ asked for.
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 
 import numpy as np
 
 from ibik_pin.exceptions import InputError
 from ibik_pin.io.files import write_atomically
 
-__all__ = ["plot_series"]
+__all__ = ["Panel", "plot_panels", "plot_series"]
+
+
+@dataclass(frozen=True)
+class Panel:
+    """One plot of a figure: series over time sharing one vertical axis.
+
+    Attributes:
+        series: Legend label -> values, each of shape (F,), in the unit of ``ylabel``; NaN values
+            leave gaps in the lines.
+        ylabel: The vertical axis label, unit included (e.g. ``"residual [mm]"``).
+        title: The title above the plot.
+        ylim: The vertical axis range; None for matplotlib's, which starts at 0 when no value
+            is negative (a residual or a fraction read from a zero baseline).
+        highlight: The label of a series drawn thick and black (a mean over the others), or None.
+    """
+
+    series: dict[str, np.ndarray]
+    ylabel: str
+    title: str
+    ylim: tuple[float, float] | None = None
+    highlight: str | None = None
 
 
 def plot_series(
@@ -25,49 +47,74 @@ def plot_series(
     title: str,
     xlabel: str = "time [s]",
 ) -> None:
-    """A PNG line plot of one or more series over time, with legend, grid and axis labels.
+    """A PNG line plot of one or more series over time (:func:`plot_panels` with one panel)."""
+    plot_panels(path, times, [Panel(series, ylabel, title)], xlabel)
+
+
+def plot_panels(
+    path: str | os.PathLike[str],
+    times: np.ndarray,
+    panels: list[Panel],
+    xlabel: str = "time [s]",
+) -> None:
+    """A PNG of panels stacked over one time axis, each with legend, grid and axis labels.
 
     The figure is drawn with matplotlib's Agg canvas directly: no global backend is selected,
-    so the caller's matplotlib state is left alone. NaN values leave gaps in the lines.
+    so the caller's matplotlib state is left alone. 800 px wide, 450 px tall per panel up to two,
+    then 300 px more per panel.
 
     Args:
         path: The .png file to write.
         times: Time of each sample, shape (F,) [s].
-        series: Legend label -> values, each of shape (F,), in the unit of ``ylabel``.
-        ylabel: The vertical axis label, unit included (e.g. ``"residual [mm]"``).
-        title: The title above the plot.
+        panels: The plots, top first.
         xlabel: The horizontal axis label, unit included.
 
     Raises:
-        InputError: No series, or a series whose shape is not (F,), or the file cannot be
-            written.
+        InputError: No panel, a panel without series, a series whose shape is not (F,), or the
+            file cannot be written.
     """
     times = np.asarray(times, dtype=float)
     if times.ndim != 1:
         raise InputError(f"times: expected shape (F,) [s], got {times.shape}")
-    if not series:
-        raise InputError("series: expected at least one series, got none")
-    checked = {}
-    for label, values in series.items():
-        values = np.asarray(values, dtype=float)
-        if values.shape != times.shape:
-            raise InputError(
-                f"series[{label!r}]: expected shape {times.shape} like times, got {values.shape}"
-            )
-        checked[label] = values
+    if not panels:
+        raise InputError("panels: expected at least one panel, got none")
+    checked = []
+    for panel in panels:
+        if not panel.series:
+            raise InputError(f"panel {panel.title!r}: expected at least one series, got none")
+        values_by_label = {}
+        for label, values in panel.series.items():
+            values = np.asarray(values, dtype=float)
+            if values.shape != times.shape:
+                raise InputError(f"series[{label!r}]: expected shape {times.shape} like times, got {values.shape}")
+            values_by_label[label] = values
+        checked.append((panel, values_by_label))
 
+    from matplotlib import colormaps
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    figure = Figure(figsize=(8.0, 4.5), dpi=100)
+    height = 4.5 if len(panels) == 1 else 4.5 + 3.0 * (len(panels) - 1)
+    figure = Figure(figsize=(8.0, height), dpi=100)
     FigureCanvasAgg(figure)
-    axes = figure.add_subplot()
-    for label, values in checked.items():
-        axes.plot(times, values, label=label, linewidth=1.5)
-    axes.set_xlabel(xlabel)
-    axes.set_ylabel(ylabel)
-    axes.set_title(title)
-    axes.grid(True, alpha=0.4)
-    axes.legend(loc="best")
+    for index, (panel, values_by_label) in enumerate(checked):
+        axes = figure.add_subplot(len(panels), 1, index + 1)
+        # matplotlib's default cycle repeats after 10 colours; tab20 tells 20 targets apart.
+        count = len(values_by_label)
+        colors = [colormaps["tab20"](index % 20) if count > 10 else None for index in range(count)]
+        for (label, values), color in zip(values_by_label.items(), colors, strict=False):
+            if label == panel.highlight:
+                axes.plot(times, values, label=label, linewidth=2.5, color="black", zorder=3)
+            else:
+                axes.plot(times, values, label=label, linewidth=1.2, color=color)
+        if panel.ylim is not None:
+            axes.set_ylim(*panel.ylim)
+        elif all(np.nanmin(v, initial=0.0) >= 0.0 for v in values_by_label.values()):
+            axes.set_ylim(bottom=0.0)
+        axes.set_xlabel(xlabel)
+        axes.set_ylabel(panel.ylabel)
+        axes.set_title(panel.title)
+        axes.grid(True, alpha=0.4)
+        axes.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small", borderaxespad=0.0)
     figure.tight_layout()
     write_atomically(path, lambda temporary: figure.savefig(temporary, format="png"))
