@@ -70,14 +70,12 @@ class TrackingSettings:
         axis_weight: weight of the silhouette-axis term in the two-way criterion.
         axis_scale: the axis term's robust scale [m] at the subject's distance: an axis sample
             farther than about this from every projected segment stops pulling.
-        swivel_search: once each frame's targets are met, sample the swivel circle of every
-            elbow and knee that is not a target on the image criterion and hold each at a clearly
-            better sample, below the targets and above the image level, for the frame's image
-            steps (tracking.swivel): recovers limbs that fast motion threw into another basin of
-            the criterion, which local steps never leave. Runs only when two views cross
-            (tracking.swivel.views_cross). On by default: with the trunk held (image_moves) it
-            brought the real-mocap benchmark's boxing elbows from about 100 mm to under 20 mm
-            (2 views; README), at about half the frame rate.
+        swivel_search: once each frame's targets are met, sample the swivel circle of every free
+            elbow and knee on the image criterion and hold each at a clearly better sample, below
+            the targets, for the frame's image steps (tracking.swivel): recovers limbs that fast
+            motion threw into another basin of the criterion. Runs only when two views cross.
+            With the trunk held (image_moves) it brought the real-mocap benchmark's boxing elbows
+            from about 100 mm to under 20 mm (2 views; README).
         feet_by_ankle: toe and heel targets move only the joints that do not move their ankle
             (Tracker._foot_point_joints); False lets them move the whole leg, as a plain
             end-effector target does.
