@@ -103,6 +103,38 @@ def test_a_limb_whose_ends_leave_the_silhouettes_is_not_searched(human):
     assert "LElbow" in SwivelSearch(human, terms, samples=36).hints(moved(away), ["LElbow"])
 
 
+class _Towards:
+    """A criterion of the elbow alone: minus its distance to a point [m] (what values_at needs)."""
+
+    def __init__(self, human, point):
+        self.frame_ids = human.frame_ids(["LElbow"])
+        self.point = np.asarray(point)
+        self.enabled = True
+
+    def values_at(self, positions, moved=None):
+        return -np.linalg.norm(positions[:, 0] - self.point, axis=1)
+
+
+def test_a_hint_needs_every_term_to_agree(human):
+    import pinocchio as pin
+
+    q = pin.neutral(human.model)
+    for joint, angle in [("left_shoulder_X", -1.2), ("left_elbow_Z", 1.3)]:
+        q[human.model.joints[human.model.getJointId(joint)].idx_q] = angle
+    configuration = Configuration(human.model, q)
+    shoulder, elbow, wrist = configuration.frame_positions(human.frame_ids(["LShoulder", "LElbow", "LWrist"]))
+    across = swivel_circle(shoulder, elbow, wrist, 2)[1]  # the far side of the circle
+    pulling = _Towards(human, across)
+    assert "LElbow" in SwivelSearch(human, [(pulling, 3.0)]).hints(configuration, ["LElbow"])
+    # A second term that prefers the joint where it is: the sum still peaks across the circle,
+    # but that term would be worse there, so no hint.
+    staying = _Towards(human, elbow)
+    search = SwivelSearch(human, [(pulling, 3.0), (staying, 1.0)])
+    values = 3.0 * pulling.values_at(across[None, None]) + staying.values_at(across[None, None])
+    assert values[0] > 3.0 * pulling.values_at(elbow[None, None])[0]  # the sum prefers across
+    assert search.hints(configuration, ["LElbow"]) == {}
+
+
 def test_a_search_needs_three_samples(human):
     with pytest.raises(InputError, match="at least 3"):
         SwivelSearch(human, [], samples=2)
