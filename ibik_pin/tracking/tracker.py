@@ -1,9 +1,10 @@
 """Tracking a recorded sequence, frame after frame, each frame warm-started from the previous one.
 
-Every keypoint present in the targets is an end-effector target (level 1: pelvis and legs, level 2:
-trunk, head and arms); the image criterion is level 3 and a light posture prior level 4. With
-`use_image=False` the identical solve runs without the image level: the blind PIK baseline (same
-targets, iterations, initial state and limits).
+The levels come from a priority stack (tracking.stack; `TrackingSettings.stack`, by default
+ibik_pin/data/default_stack.toml): every keypoint present in the targets is an end-effector target
+(level 1: pelvis and legs, level 2: trunk, head and arms); the image criterion is level 3 and a
+light posture prior level 4. With `use_image=False` the identical solve runs without the image:
+the blind PIK baseline (same targets, iterations, initial state and limits).
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -20,18 +21,18 @@ from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
 from ibik_pin.limits import JointLimits
 from ibik_pin.model import BodyModel
 from ibik_pin.solvers import LevelReport, SolveResult, make_solver
-from ibik_pin.tasks import FramePositionTask, ImageTask, PostureTask
-from ibik_pin.tasks.base import GradientTask, Task
+from ibik_pin.tasks import FramePositionTask, ImageTask
+from ibik_pin.tasks.base import GradientTask
 from ibik_pin.tasks.segments import SegmentCriterion
 from ibik_pin.tasks.silhouette_axis import SilhouetteAxisTask
 from ibik_pin.tasks.weighted_sum import WeightedSum
+from ibik_pin.tracking.levels import StackPlan, StackTasks
+from ibik_pin.tracking.outcomes import LevelOutcome, level_outcomes
+from ibik_pin.tracking.stack import CRITERIA, Stack
 from ibik_pin.tracking.swivel import LIMB_ENDS, SwivelSearch, views_cross
 from ibik_pin.tracking.views import axis_views, initial_configuration, make_views, support_caps
 from ibik_pin.vision.segmentation import TemporalMajority
 
-LOWER_BODY = {"Hip", "LHip", "RHip", "LKnee", "RKnee", "LAnkle", "RAnkle", "LBigToe", "LSmallToe",
-              "LHeel", "RBigToe", "RSmallToe", "RHeel"}
-CRITERIA = ("paper", "two-way")
 # Foot points and the ankle each belongs to (see Tracker._foot_point_joints).
 FOOT_POINT_ANKLES = {f"{side}{point}": f"{side}Ankle" for side in "LR" for point in ("BigToe", "SmallToe", "Heel")}
 
@@ -75,6 +76,9 @@ class TrackingSettings:
         feet_by_ankle: toe and heel targets move only the joints that do not move their ankle
             (Tracker._foot_point_joints); False lets them move the whole leg, as a plain
             end-effector target does.
+        stack: the priority levels and their tasks (tracking.stack); None: Stack.default(). An
+            image task's criterion, step and views, when the stack gives them, replace
+            `criterion`, `image_step` and the cameras; a posture task's weight `posture_weight`.
     """
 
     method: str = "qp"
@@ -91,6 +95,7 @@ class TrackingSettings:
     axis_scale: float = 0.10
     swivel_search: bool = False
     feet_by_ankle: bool = True
+    stack: Stack | None = None
 
 
 @dataclass
@@ -110,12 +115,15 @@ class TrackingResult:
         dropped_targets: per frame, the targets absent (NaN) in that frame.
         disabled_views: per frame, the cameras whose silhouette was empty.
         solve_seconds: wall time of the solves alone [s].
-        level_names: the L priority levels of each frame's solve, highest first: "lower-body
-            targets", "upper-body targets", "image" (when the image is used), "posture".
-        level_reports: per frame, per level (L), the solver's report of the frame solve's last
-            step: status ("solved", "relaxed", "failed", "empty") and residual (NaN for the image
-            level, which reports its criterion instead). With `swivel_search`, the frame's main
-            solve, before the swivel pass.
+        level_names: the L levels of the stack, highest first (the default stack's: "lower-body
+            targets", "upper-body targets", "image" (when the image is used), "posture").
+        level_reports: per frame, per level handed to the solver (one per strict stack level, one
+            per run of weighted ones), the solver's report of the frame solve's last step: status
+            ("solved", "relaxed", "failed", "empty") and residual (NaN for the image level, which
+            reports its criterion instead). With `swivel_search`, the frame's main solve, before
+            the swivel pass.
+        level_outcomes: per frame, per stack level (L), its status, residual, criterion and how
+            much of it the levels above sacrificed, at the frame's solution (tracking.outcomes).
     """
 
     q: np.ndarray
@@ -131,6 +139,7 @@ class TrackingResult:
     target_distances: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     level_names: list[str] = field(default_factory=list)
     level_reports: list[list[LevelReport]] = field(default_factory=list)
+    level_outcomes: list[list[LevelOutcome]] = field(default_factory=list)
 
     @property
     def frames_per_second(self) -> float:
@@ -146,16 +155,18 @@ def solve_first_frame(
     starts: int = 1,
     spread: float = 0.5,
     seed: int = 0,
+    blind_levels: list[list] | None = None,
 ) -> SolveResult:
     """The first frame, from configuration.q: blind IK, then every level; with `starts` > 1 also
     from random joint angles (a fraction `spread` of each range around the middle, root kept),
     keeping the solution whose image criterion is highest. Returns the kept solution's last solve.
+    The blind solve takes `blind_levels` (default: the levels without the one holding image_task).
 
     Later frames warm-start from this one and follow the criterion's local maximum, so a wrong
     basin on the first frame (an elbow 20 cm off with its forearm still on the silhouette) lasts;
     several starts make that much rarer.
     """
-    blind = [level for level in levels if image_task not in level]
+    blind = [level for level in levels if image_task not in level] if blind_levels is None else blind_levels
     limits = solver.limits
     rng = np.random.default_rng(seed)
     initial = configuration.q.copy()
@@ -183,12 +194,18 @@ class Tracker:
 
     def __init__(self, body: BodyModel, cameras: Sequence = (), settings: TrackingSettings | None = None):
         self.body = body
-        self.cameras = list(cameras)
-        self.settings = settings or TrackingSettings()
+        settings = settings or TrackingSettings()
+        self.stack = settings.stack or Stack.default()
+        self.stack.check_names(body.keypoints, [camera.name for camera in cameras])
+        image = self.stack.image
+        # The stack's image task, where it says, overrides the settings and picks the cameras.
+        self.settings = replace(settings, criterion=image.criterion or settings.criterion,
+                                image_step=image.step or settings.image_step) if image else settings
+        self.cameras = [camera for camera in cameras if image is None or image.views is None
+                        or camera.name in image.views]
         model = body.model
         self.limits = JointLimits(model)
         self.solver = make_solver(self.settings.method, limits=self.limits)
-        self.posture = PostureTask(model, weight=self.settings.posture_weight)
         self.image_task = ImageTask(body, (), samples_per_segment=self.settings.samples_per_segment,
                                     max_step_size=self.settings.image_step)
         if self.settings.criterion not in CRITERIA:
@@ -205,11 +222,14 @@ class Tracker:
         self.swivel = SwivelSearch(body, terms)
         # The cameras are fixed for the tracker's life, so whether the search can run is decided once.
         self._search_swivels = self.settings.swivel_search and views_cross(self.cameras)
-        self._target_tasks: dict[str, FramePositionTask] = {}
+        # Whether the image is followed: asked for, cameras to read, and a level of the stack for it.
+        self.use_image = self.settings.use_image and bool(self.cameras) and image is not None
+        self.tasks = StackTasks(self.stack, body, self.image_criterion if self.use_image else None,
+                                self.settings.posture_weight, self._foot_point_joints)
         self._hint_tasks: dict[str, FramePositionTask] = {}
 
     def _follow_swivel_hints(self, configuration: Configuration, names: list[str], present: np.ndarray,
-                             levels: list[list]) -> None:
+                             plan: StackPlan) -> None:
         """Solve again with the free elbows and knees held at their swivel hints, if any."""
         targeted = {name for name, here in zip(names, present, strict=True) if here}
         free = [name for name in LIMB_ENDS if name not in targeted]
@@ -222,24 +242,10 @@ class Tracker:
                 self._hint_tasks[name] = FramePositionTask(self.body.model, self.body.keypoints[name])
             self._hint_tasks[name].set_target(position)
             hint_tasks.append(self._hint_tasks[name])
-        # The hints rank below every end effector, so a hint that cannot be met bends nothing else,
-        # and above the image level, whose local climb would otherwise take the joint back.
-        targets = [level for level in levels if self.image_criterion not in level and self.posture not in level]
-        self.solver.solve(configuration, [*targets, hint_tasks, [self.image_criterion], [self.posture]],
-                          iterations=self.settings.iterations)
-
-    def _levels(self, names: list[str]) -> list[list]:
-        for name in names:
-            if name not in self._target_tasks:
-                self._target_tasks[name] = FramePositionTask(self.body.model, self.body.keypoints[name],
-                                                             driven=self._foot_point_joints(name))
-        lower: list[Task | GradientTask] = [self._target_tasks[n] for n in names if n in LOWER_BODY]
-        upper: list[Task | GradientTask] = [self._target_tasks[n] for n in names if n not in LOWER_BODY]
-        levels = [lower, upper]
-        if self.settings.use_image and self.cameras:
-            levels.append([self.image_criterion])
-        levels.append([self.posture])
-        return levels
+        # The hints rank just above the image level: below the end effectors of the default stack,
+        # so a hint that cannot be met bends nothing else, and above the image, whose local climb
+        # would otherwise take the joint back.
+        self.solver.solve(configuration, plan.with_level_above_image(hint_tasks), iterations=self.settings.iterations)
 
     def _foot_point_joints(self, name: str) -> np.ndarray | None:
         """For a toe or heel target: the joints that move it but not its ankle at the neutral pose
@@ -261,11 +267,6 @@ class Tracker:
         moves = np.linalg.norm(configuration.frame_translation_jacobian(self.body.frame_id(name)), axis=0) > 1e-9
         moves_ankle = np.linalg.norm(configuration.frame_translation_jacobian(self.body.frame_id(ankle)), axis=0) > 1e-9
         return moves & ~moves_ankle
-
-    def _level_names(self) -> list[str]:
-        """What each level of `_levels` holds, in the same order."""
-        image = ["image"] if self.settings.use_image and self.cameras else []
-        return ["lower-body targets", "upper-body targets", *image, "posture"]
 
     def track(
         self,
@@ -291,7 +292,7 @@ class Tracker:
         targets = np.asarray(targets, dtype=float)
         if targets.ndim != 3 or targets.shape[1:] != (len(names), 3):
             raise InputError(f"targets must have shape (F, {len(names)}, 3), got {targets.shape}")
-        use_image = self.settings.use_image and bool(self.cameras)
+        use_image = self.use_image
         frame_count = targets.shape[0]
         # The silhouettes the image level reads (temporally filtered if asked); None without the image.
         source: SilhouetteSource | None = None
@@ -301,7 +302,9 @@ class Tracker:
             source = silhouettes
             if self.settings.mask_filter_radius > 0:
                 source = TemporalMajority(silhouettes, frame_count, self.settings.mask_filter_radius)
-        levels = self._levels(names)
+        plan = self.tasks.plan(names)
+        levels = plan.solver_levels
+        report_index = plan.report_index(self.solver)
         keypoint_names = list(self.body.keypoints)
         keypoint_ids = self.body.frame_ids(keypoint_names)
         result = TrackingResult(
@@ -312,7 +315,7 @@ class Tracker:
             target_names=list(names),
             target_distances=np.full((frame_count, len(names)), np.nan),
             overlap=np.full((frame_count, len(self.cameras)), np.nan),
-            level_names=self._level_names(),
+            level_names=plan.names,
         )
         configuration = Configuration(self.body.model, initial_configuration(self.body, names, targets[0]))
         caps = support_caps(self.cameras, configuration.q[:3]) if use_image else []
@@ -320,7 +323,7 @@ class Tracker:
         for frame in range(frame_count):
             present = np.all(np.isfinite(targets[frame]), axis=1)
             for k, name in enumerate(names):
-                self._target_tasks[name].set_target(targets[frame, k] if present[k] else None)
+                self.tasks.target_tasks[name].set_target(targets[frame, k] if present[k] else None)
             result.dropped_targets.append([n for n, p in zip(names, present, strict=True) if not p])
             disabled: list[str] = []
             if source is not None:  # the image is used
@@ -332,28 +335,31 @@ class Tracker:
                     if self.settings.criterion == "two-way":
                         self.axis_task.set_views(axis_views(self.cameras, masks, axis_scales))
             result.disabled_views.append(disabled)
+            self.tasks.start_frame(configuration)
             started = time.perf_counter()
             if frame == 0:
-                solved = solve_first_frame(self.solver, configuration, levels,
-                                           self.image_criterion if use_image else None,
-                                           self.settings.first_frame_iterations, self.settings.first_frame_starts)
+                solved = solve_first_frame(self.solver, configuration, levels, plan.image_criterion,
+                                           self.settings.first_frame_iterations, self.settings.first_frame_starts,
+                                           blind_levels=plan.blind_levels())
             else:
                 solved = self.solver.solve(configuration, levels, iterations=self.settings.iterations)
             result.level_reports.append(solved.levels)
             if use_image and self._search_swivels:
-                self._follow_swivel_hints(configuration, names, present, levels)
+                self._follow_swivel_hints(configuration, names, present, plan)
             result.solve_seconds += time.perf_counter() - started
             result.q[frame] = configuration.q
             result.keypoints[frame] = configuration.frame_positions(keypoint_ids)
             for k, name in enumerate(names):
                 if present[k]:
                     result.target_distances[frame, k] = np.linalg.norm(
-                        self._target_tasks[name].compute_error(configuration))
+                        self.tasks.target_tasks[name].compute_error(configuration))
             errors = result.target_distances[frame, present]
             result.target_residuals[frame] = np.mean(errors) if errors.size else np.nan
             if use_image:
                 result.overlap[frame] = self._overlap_per_view(configuration, disabled)
             result.limit_hits.append(self.limits.at_limit(configuration.q))
+            result.level_outcomes.append(level_outcomes(plan, configuration, solved.levels, report_index,
+                                                        self.solver.damping))
             if progress is not None:
                 progress()
         return result
