@@ -9,12 +9,14 @@ weighted (non-strict) levels.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from ibik_pin.configuration import Configuration
+from ibik_pin.exceptions import IbikWarning
 from ibik_pin.model import BodyModel
 from ibik_pin.solvers import Solver
 from ibik_pin.tasks import FramePositionTask, PostureTask
@@ -153,6 +155,12 @@ class StackTasks:
             kept_names.append(level.name)
             kept_tasks.append(tasks)
             strict.append(level.strict)
+        unused = [name for name in names if name not in self.target_tasks]
+        if unused:
+            warnings.warn(f"{self.stack.source}: no level names the target(s) {', '.join(unused)}: nothing pulls "
+                          "them (their residuals are still reported)", IbikWarning, stacklevel=3)
+            for name in unused:  # measured, never solved
+                self._target_task(name, TaskSpec("position"))
         # Consecutive weighted levels share one solver level.
         solver_index: list[int] = []
         for index in range(len(kept_names)):

@@ -5,14 +5,17 @@ frame's solution, what a user studying priorities asks of each stack level:
 
 - residual: sqrt(sum_i w_i |e_i|^2) over its least-squares tasks (position [m], posture [rad],
   centre of mass [m]); None for the image, whose criterion h(q) is given instead;
-- sacrificed: the share of what the level asks that the levels above it leave no freedom for, in
-  [0, 1]. For least-squares rows A dq ~= b (b = -sqrt(w) gain e): (r_above - r_alone) / |b|, where
-  r_alone is the part of b no joint motion can produce (|b - A A^+ b|) and r_above the part no
-  motion in the null space Z of the higher levels can (|b - AZ (AZ)^+ b|). For the image:
-  1 - |Z^T g| with g its unit gradient. 0: the levels above cost it nothing; 1: they forbid every
-  change it asks for. First order, at the solution, joint limits and damping not counted; the
-  levels above a weighted group are the solver levels above it (the group's own tasks trade by
-  weight, not priority).
+- sacrificed: how much of that residual the levels above keep the level from removing. With its
+  rows A = sqrt(w) J and its weighted error r = sqrt(w) e (so residual = |r|): r_above - r_alone,
+  where r_alone = |r - A A^+ r| is the part no joint motion can remove (a target out of reach of
+  its own joints) and r_above = |r - AZ (AZ)^+ r| the part no motion in the null space Z of the
+  levels above can; 0 <= sacrificed <= residual, in the residual's units. For the image level,
+  which has no residual: 1 - |Z^T g| with g its unit gradient, the share of its ascent direction
+  the levels above take (0: none, 1: all). First order, at the solution, joint limits and damping
+  not counted; the levels above a weighted group are the solver levels above it (the group's own
+  tasks trade by weight, not priority). At a converged solution a level has removed what the
+  levels above allow, so most of a strict level's residual is either out of reach (residual -
+  sacrificed) or sacrificed.
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ from ibik_pin.tracking.levels import StackPlan
 
 __all__ = ["LevelOutcome", "level_outcomes"]
 
-NEGLIGIBLE_REQUEST = 1e-12  # |b| below this: the level asks for nothing, so nothing is sacrificed
+NEGLIGIBLE_ERROR = 1e-12  # a residual below this: the level asks for nothing, so nothing is sacrificed
 
 
 @dataclass
@@ -43,8 +46,9 @@ class LevelOutcome:
             "solved", "relaxed", "failed" or "empty" ("empty" too for a level the scheme does not
             solve: ik and liegeois ignore the levels below the image).
         residual: weighted error of its least-squares tasks at the solution; NaN without any.
-        sacrificed: share of its request the levels above forbid, in [0, 1]; NaN when undefined
-            (no enabled task, or an image criterion without gradient).
+        sacrificed: the part of the residual the levels above keep it from removing (image: the
+            share of its gradient they take, in [0, 1]); NaN when undefined (no enabled task, or an
+            image criterion without gradient).
         criterion: h(q) of its image criterion at the solution; NaN for other levels.
     """
 
@@ -63,13 +67,15 @@ def _unexplained(matrix: np.ndarray, request: np.ndarray) -> float:
     return float(np.linalg.norm(request - u[:, :rank] @ (u[:, :rank].T @ request)))
 
 
-def _rows(tasks: Sequence, configuration: Configuration) -> tuple[np.ndarray, np.ndarray]:
-    """Stacked weighted rows (A, b) of the enabled least-squares tasks (image rows left out)."""
-    systems = [task.compute_linear_system(configuration) for task in tasks
-               if isinstance(task, Task) and task.enabled and not isinstance(task, CriterionStepTask)]
-    if not systems:
+def _weighted_rows(tasks: Sequence, configuration: Configuration) -> tuple[np.ndarray, np.ndarray]:
+    """(A, r): sqrt(w) J and sqrt(w) e of the enabled least-squares tasks stacked (image rows left out)."""
+    chosen = [task for task in tasks if isinstance(task, Task) and task.enabled
+              and not isinstance(task, CriterionStepTask)]
+    if not chosen:
         return np.zeros((0, configuration.nv)), np.zeros(0)
-    return np.vstack([A for A, _ in systems]), np.concatenate([b for _, b in systems])
+    jacobians = [np.sqrt(task.weight) * task.compute_jacobian(configuration) for task in chosen]
+    errors = [np.sqrt(task.weight) * task.compute_error(configuration) for task in chosen]
+    return np.vstack(jacobians), np.concatenate(errors)
 
 
 def _outcome(tasks: Sequence, configuration: Configuration, null_basis: np.ndarray, status: str) -> LevelOutcome:
@@ -84,17 +90,14 @@ def _outcome(tasks: Sequence, configuration: Configuration, null_basis: np.ndarr
         sacrificed = 1.0 - free if np.linalg.norm(direction) > 0.0 else float("nan")
         return LevelOutcome(status, float("nan"), float(np.clip(sacrificed, 0.0, 1.0)),
                             image.compute_value(configuration))
-    A, b = _rows(tasks, configuration)
-    if b.size == 0:
+    A, error = _weighted_rows(tasks, configuration)
+    if error.size == 0:
         return LevelOutcome(status, float("nan"), float("nan"), float("nan"))
-    gains = np.concatenate([np.full(task.compute_error(configuration).size, task.gain) for task in tasks
-                            if isinstance(task, Task) and task.enabled and not isinstance(task, CriterionStepTask)])
-    residual = float(np.linalg.norm(b / gains))  # sqrt(sum w |e|^2)
-    request = float(np.linalg.norm(b))
-    if request <= NEGLIGIBLE_REQUEST:
+    residual = float(np.linalg.norm(error))  # sqrt(sum w |e|^2)
+    if residual <= NEGLIGIBLE_ERROR:
         return LevelOutcome(status, residual, 0.0, float("nan"))
-    lost = _unexplained(A @ null_basis, b) - _unexplained(A, b)
-    return LevelOutcome(status, residual, float(np.clip(lost / request, 0.0, 1.0)), float("nan"))
+    lost = _unexplained(A @ null_basis, error) - _unexplained(A, error)
+    return LevelOutcome(status, residual, float(np.clip(lost, 0.0, residual)), float("nan"))
 
 
 def level_outcomes(plan: StackPlan, configuration: Configuration, reports: Sequence[LevelReport],

@@ -111,6 +111,8 @@ class TrackingResult:
         target_distances: (F, T) distance of each target keypoint of the model to its target [m],
             NaN where the target is absent that frame.
         overlap: (F, V) the criterion of each view at the solution (NaN where disabled).
+        camera_names: the cameras whose images were read, in the order of overlap's columns
+            (empty when blind).
         limit_hits: per frame, the joints at a limit.
         dropped_targets: per frame, the targets absent (NaN) in that frame.
         disabled_views: per frame, the cameras whose silhouette was empty.
@@ -140,6 +142,7 @@ class TrackingResult:
     level_names: list[str] = field(default_factory=list)
     level_reports: list[list[LevelReport]] = field(default_factory=list)
     level_outcomes: list[list[LevelOutcome]] = field(default_factory=list)
+    camera_names: list[str] = field(default_factory=list)
 
     @property
     def frames_per_second(self) -> float:
@@ -196,7 +199,7 @@ class Tracker:
         self.body = body
         settings = settings or TrackingSettings()
         self.stack = settings.stack or Stack.default()
-        self.stack.check_names(body.keypoints, [camera.name for camera in cameras])
+        self.stack.check_names(body.keypoints, [camera.name for camera in cameras] if cameras else None)
         image = self.stack.image
         # The stack's image task, where it says, overrides the settings and picks the cameras.
         self.settings = replace(settings, criterion=image.criterion or settings.criterion,
@@ -316,6 +319,7 @@ class Tracker:
             target_distances=np.full((frame_count, len(names)), np.nan),
             overlap=np.full((frame_count, len(self.cameras)), np.nan),
             level_names=plan.names,
+            camera_names=[camera.name for camera in self.cameras] if use_image else [],
         )
         configuration = Configuration(self.body.model, initial_configuration(self.body, names, targets[0]))
         caps = support_caps(self.cameras, configuration.q[:3]) if use_image else []
