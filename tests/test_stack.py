@@ -172,3 +172,14 @@ def test_ibik_track_reports_each_level_of_the_stack_it_was_given(tmp_path, human
         assert len(levels["residual_per_frame"][name]) == len(levels["sacrificed_per_frame"][name]) == 2
     assert levels["mean_sacrificed"]["legs"] == 0.0
     assert levels["status_per_frame"]["legs"] == ["solved", "solved"]
+
+
+def test_the_readme_s_example_stack_is_valid(human, tmp_path):
+    from tests.paths import REPOSITORY
+
+    readme = (REPOSITORY / "README.md").read_text()
+    section = readme[readme.index("## Priority stacks"):]
+    example = section[section.index("```toml") + len("```toml"):section.index("```\n\n")]
+    stack = Stack.from_toml(write_stack(tmp_path, example))
+    assert [level.name for level in stack.levels] == ["legs", "image", "arms and head", "posture"]
+    stack.check_names(human.keypoints, ["cam1", "cam2"])
