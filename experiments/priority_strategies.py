@@ -243,7 +243,7 @@ def main() -> None:
               f"(eq. 9, against the raw mocap joints); target residual: mean over every target keypoint; limit hits: "
               f"joints at a limit per frame; limit violation: the largest excursion of q.csv outside the model's "
               f"limits. Total wall time {wall:.0f} s on {platform.node()} ({len(rows)} runs; 2 cores shared with "
-              f"other sessions: the frame rates are inflated by that sharing).")
+              f"other sessions: the frame rates are lowered by that sharing).")
     (arguments.out / "priority_strategies.md").write_text(markdown(table, header))
     plots = [plot_levels(rows, arguments.out, clip, condition, int(_list(arguments.views)[0]))
              for clip in _list(arguments.clips) for condition in _list(arguments.conditions)[:1]]
