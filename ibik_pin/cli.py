@@ -70,6 +70,9 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
                              "them, z-up in the calibration's own world (as many mocap systems "
                              "export); auto (default) tells them apart by projecting the targets "
                              "into the cameras (y-up without --calibration)")
+    parser.add_argument("--stack", type=Path, metavar="STACK.toml",
+                        help="priority levels and their tasks (default: the package's default_stack.toml; "
+                             "see the README, Priority stacks)")
     parser.add_argument("--overlay", action="store_true",
                         help="also write overlay videos, a residual plot and an HTML 3D replay")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -78,6 +81,7 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _job(arguments: argparse.Namespace) -> TrackJob:
     from ibik_pin.tracking.pipeline import TrackJob
+    from ibik_pin.tracking.stack import Stack
     from ibik_pin.tracking.tracker import TrackingSettings
 
     if arguments.iterations < 1:
@@ -99,7 +103,8 @@ def _job(arguments: argparse.Namespace) -> TrackJob:
         settings=TrackingSettings(method=arguments.method, iterations=arguments.iterations,
                                   use_image=not arguments.no_image, mask_filter_radius=arguments.mask_filter,
                                   criterion=arguments.criterion, swivel_search=arguments.swivel_search,
-                                  image_moves=arguments.image_moves),
+                                  image_moves=arguments.image_moves,
+                                  stack=Stack.from_toml(arguments.stack) if arguments.stack else None),
         overlay=arguments.overlay,
         quiet=arguments.quiet,
         trc_axes=arguments.trc_axes,

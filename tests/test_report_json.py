@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from ibik_pin.solvers import LevelReport
 from ibik_pin.tracking.axes import AxesChoice, AxesScore
+from ibik_pin.tracking.outcomes import LevelOutcome
 from ibik_pin.tracking.report import ResidualStats, TrackingReport
 from ibik_pin.tracking.tracker import TrackingResult, TrackingSettings
 
@@ -34,8 +34,8 @@ def tracking_result() -> TrackingResult:
         target_names=["Hip", "RWrist"],
         target_distances=distances,
         level_names=["lower-body targets", "posture"],
-        level_reports=[[LevelReport("tasks", 0.0, np.nan, first), LevelReport("tasks", 0.1, np.nan, "relaxed")]
-                       for first in ("solved", "relaxed", "solved")],
+        level_outcomes=[[LevelOutcome(first, 0.01, 0.0, np.nan), LevelOutcome("relaxed", 0.2, sacrificed, np.nan)]
+                        for first, sacrificed in (("solved", 0.5), ("relaxed", np.nan), ("solved", 0.3))],
     )
 
 
@@ -74,12 +74,18 @@ def test_frames_are_keyed_by_the_trc_s_frame_numbers(report):
     assert parsed["trc_axes"]["inside_silhouettes"] == {}
 
 
-def test_the_solver_s_status_is_reported_per_level_and_frame(report):
-    parsed = json.loads(report.to_json())["solver_levels"]
+def test_each_level_s_status_residual_and_sacrifice_are_reported_per_frame(report):
+    parsed = json.loads(report.to_json(), parse_constant=refuse_constant)["solver_levels"]
+    assert parsed["stack"] == "default"
     assert parsed["levels"] == ["lower-body targets", "posture"]
     assert parsed["status_per_frame"]["lower-body targets"] == ["solved", "relaxed", "solved"]
     assert parsed["frames_per_status"] == {"lower-body targets": {"relaxed": 1, "solved": 2},
                                            "posture": {"relaxed": 3}}
+    assert parsed["residual_per_frame"]["posture"] == [0.2, 0.2, 0.2]
+    assert parsed["sacrificed_per_frame"]["posture"] == [0.5, None, 0.3]
+    assert parsed["mean_sacrificed"]["posture"] == pytest.approx(0.4, abs=1e-12)  # the undefined frame skipped
+    assert parsed["mean_residual"]["lower-body targets"] == pytest.approx(0.01, abs=1e-12)
+    assert parsed["criterion_per_frame"] == {}  # no image level
 
 
 def test_the_report_reads_like_its_json(report):
@@ -103,19 +109,6 @@ def test_the_summary_lists_the_targets_worst_first_in_millimetres(report):
 def test_write_leaves_a_file_json_loads(report, tmp_path):
     report.write(tmp_path / "report.json")
     assert json.loads((tmp_path / "report.json").read_text(), parse_constant=refuse_constant)["frames"] == 3
-
-
-def test_levels_merged_by_the_scheme_are_reported_by_number():
-    from types import SimpleNamespace
-
-    from ibik_pin.tracking.report import SolverLevelsReport
-
-    solved = SimpleNamespace(status="solved")
-    result = SimpleNamespace(level_names=["lower body", "upper body", "image", "posture"],
-                             level_reports=[[solved], [solved]])  # ik: every target in one level
-    report = SolverLevelsReport.from_result(result)
-    assert report.levels == ["level 1"]
-    assert report.status_per_frame == {"level 1": ["solved", "solved"]}
 
 
 def test_report_json_names_the_unit_of_every_figure_and_a_0_1_overlap(report):

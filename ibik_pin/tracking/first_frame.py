@@ -23,10 +23,12 @@ def solve_first_frame(
     spread: float = 0.5,
     seed: int = 0,
     solve: Callable[..., SolveResult] | None = None,
+    blind_levels: list[list] | None = None,
 ) -> SolveResult:
     """The first frame, from configuration.q: blind IK, then every level; with `starts` > 1 also
     from random joint angles (a fraction `spread` of each range around the middle, root kept),
     keeping the solution whose image criterion is highest. Returns the kept solution's last solve.
+    The blind solve takes `blind_levels` (default: the levels without the one holding image_task).
 
     Later frames warm-start from this one and follow the criterion's local maximum, so a wrong
     basin on the first frame (an elbow 20 cm off with its forearm still on the silhouette) lasts;
@@ -34,7 +36,7 @@ def solve_first_frame(
     the image (default solver.solve; the tracker passes its frame solve).
     """
     solve = solver.solve if solve is None else solve
-    blind = [level for level in levels if image_task not in level]
+    blind = [level for level in levels if image_task not in level] if blind_levels is None else blind_levels
     limits = solver.limits
     rng = np.random.default_rng(seed)
     initial = configuration.q.copy()

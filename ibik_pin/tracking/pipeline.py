@@ -13,7 +13,7 @@ import sys
 import tempfile
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -273,8 +273,8 @@ def run_track(job: TrackJob) -> TrackingReport:
     targets_m = axes.to_model(targets_trc_m)
     body = prepare_body(job, names, targets_m)
 
-    settings = job.settings
-    tracker = Tracker(body, cameras if use_image else [], settings)
+    tracker = Tracker(body, cameras if use_image else [], job.settings)
+    job = replace(job, settings=tracker.settings)  # as solved: a stack's image task may set the criterion
     with tqdm(total=frame_count, desc="tracking", unit="frame", disable=True if job.quiet else None) as bar:
         result = tracker.track(names, targets_m, silhouettes.frame if use_image and silhouettes is not None else None,
                                progress=bar.update)
@@ -331,7 +331,7 @@ def write_outputs(folder: Path, job: TrackJob, trc: TrcData, body: BodyModel, ca
     write_model_bvh(folder / "motion.bvh", body, result.q, 1.0 / frame_rate)
     write_osim_model(folder / "model.osim", body, name=f"ibik_pin_{job.targets.stem}")
     report = TrackingReport.from_tracking(
-        result, job.settings, [camera.name for camera in cameras] if job.settings.use_image else [],
+        result, job.settings, result.camera_names,
         trc.frame_numbers, times, frame_rate, axes,
     )
     report.write(folder / "report.json")

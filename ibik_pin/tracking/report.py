@@ -135,35 +135,60 @@ class TrcAxesReport:
 
 @dataclass
 class SolverLevelsReport:
-    """The solver's verdict on each priority level, frame by frame (solvers.base.LevelReport).
+    """What each level of the priority stack got, frame by frame (tracking.outcomes).
 
     Attributes:
-        levels: the priority levels, highest first.
-        status_per_frame: per level, the status of each frame's last solver step: "solved";
+        stack: where the stack came from: "default" or the stack file.
+        levels: the stack's levels, highest first.
+        status_per_frame: per level, the solver's status at each frame's last step: "solved";
             "relaxed" (a least-squares optimum with a residual: unreachable under the higher
             levels or the joint limits); "failed" (the QP backend failed, the level was skipped);
-            "empty" (nothing to do: no enabled task, no null space left or a zero gradient).
+            "empty" (nothing to do: no enabled task, no null space left or a zero gradient, or a
+            level the scheme does not solve). Weighted levels share their solver level's status.
         frames_per_status: per level, how many frames ended in each status.
+        residual_per_frame: per level, sqrt(sum w |e|^2) of its least-squares tasks at each
+            frame's solution (m for targets and the centre of mass, rad for a posture); None for
+            the image level.
+        sacrificed_per_frame: per level, the part of its residual that the levels above keep it
+            from removing, at each frame's solution (its residual's units; for the image level the
+            share of its gradient they take, 0-1).
+        criterion_per_frame: per image level, its criterion h(q) at each frame's solution.
+        mean_residual: per level, the mean of residual_per_frame (None if never defined).
+        mean_sacrificed: per level, the mean of sacrificed_per_frame (None if never defined).
     """
 
+    stack: str = "default"
     levels: list[str] = field(default_factory=list)
     status_per_frame: dict[str, list[str]] = field(default_factory=dict)
     frames_per_status: dict[str, dict[str, int]] = field(default_factory=dict)
+    residual_per_frame: dict[str, list[float | None]] = field(default_factory=dict)
+    sacrificed_per_frame: dict[str, list[float | None]] = field(default_factory=dict)
+    criterion_per_frame: dict[str, list[float | None]] = field(default_factory=dict)
+    mean_residual: dict[str, float | None] = field(default_factory=dict)
+    mean_sacrificed: dict[str, float | None] = field(default_factory=dict)
 
     @classmethod
-    def from_result(cls, result: TrackingResult) -> SolverLevelsReport:
-        if not result.level_reports:
-            return cls()
+    def from_result(cls, result: TrackingResult, stack: str = "default") -> SolverLevelsReport:
         names = list(result.level_names)
-        count = max(len(frame) for frame in result.level_reports)
-        if any(len(frame) != len(names) for frame in result.level_reports):
-            # The ik and liegeois schemes merge the target levels into one: name what they solved.
-            names = [f"level {index + 1}" for index in range(count)]
-        # A level name may repeat in principle; the index keeps each one's column apart.
-        status = {name: [frame[index].status if index < len(frame) else "empty" for frame in result.level_reports]
-                  for index, name in enumerate(names)}
+        frames = result.level_outcomes
+
+        def series(attribute: str) -> dict[str, np.ndarray]:
+            return {name: np.array([getattr(frame[index], attribute) for frame in frames], dtype=float)
+                    for index, name in enumerate(names)}
+
+        def listed(values: dict[str, np.ndarray]) -> dict[str, list[float | None]]:
+            return {name: [_finite_or_none(value) for value in column] for name, column in values.items()}
+
+        def means(values: dict[str, np.ndarray]) -> dict[str, float | None]:
+            return {name: _finite_or_none(np.mean(column[np.isfinite(column)])) if np.isfinite(column).any()
+                    else None for name, column in values.items()}
+
+        status = {name: [frame[index].status for frame in frames] for index, name in enumerate(names)}
         counts = {name: {kind: values.count(kind) for kind in sorted(set(values))} for name, values in status.items()}
-        return cls(names, status, counts)
+        residual, sacrificed, criterion = series("residual"), series("sacrificed"), series("criterion")
+        return cls(stack, names, status, counts, listed(residual), listed(sacrificed),
+                   {name: values for name, values in listed(criterion).items() if any(v is not None for v in values)},
+                   means(residual), means(sacrificed))
 
 
 @dataclass
@@ -192,7 +217,8 @@ class TrackingReport:
         joint_limit_hits: TRC frame number -> joints at a limit (frames without any omitted).
         frames_with_dropped_targets: TRC frame number -> targets absent in that frame.
         frames_with_disabled_views: TRC frame number -> cameras whose silhouette was empty.
-        solver_levels: per priority level, the solver's status at each frame.
+        solver_levels: per level of the priority stack, its status, residual and sacrifice at
+            each frame.
         inside_fraction_per_view: per camera, the fraction of the skeleton inside the silhouette
             at each frame [0-1] (None when the view was disabled).
         solve_seconds: wall time of the solves [s].
@@ -272,7 +298,8 @@ class TrackingReport:
             joint_limit_hits=by_frame(result.limit_hits),
             frames_with_dropped_targets=by_frame(result.dropped_targets),
             frames_with_disabled_views=by_frame(result.disabled_views),
-            solver_levels=SolverLevelsReport.from_result(result),
+            solver_levels=SolverLevelsReport.from_result(
+                result, "default" if settings.stack is None else settings.stack.source),
             inside_fraction_per_view={name: [_finite_or_none(value) for value in result.inside_fraction[:, index]]
                                       for index, name in enumerate(camera_names)
                                       if result.inside_fraction.shape == result.overlap.shape},

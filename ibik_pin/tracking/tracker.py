@@ -1,21 +1,21 @@
 """Tracking a recorded sequence, frame after frame, each frame warm-started from the previous one.
 
-Every keypoint present in the targets is an end-effector target (level 1: pelvis and legs, level 2:
-trunk, head and arms); the image criterion is level 3 and a light posture prior level 4. Each frame
-first takes a few steps with the targets alone, searches the free elbows' and knees' swivels
-(tracking.swivel), then takes its image steps with the root, spine, clavicles and neck held
-(Tracker._solve). With `use_image=False` the targets' levels run alone: the blind PIK baseline
-(same targets, iterations, initial state and limits).
+The levels come from a priority stack (tracking.stack; `TrackingSettings.stack`, by default
+ibik_pin/data/default_stack.toml): every keypoint present in the targets is an end-effector target
+(level 1: pelvis and legs, level 2: trunk, head and arms); the image criterion is level 3 and a
+light posture prior level 4. Each frame first takes a few steps with the targets alone, searches
+the free elbows' and knees' swivels (tracking.swivel), then takes its image steps with the root,
+spine, clavicles and neck held (Tracker._solve). With `use_image=False` the targets' levels run
+alone: the blind PIK baseline (same targets, iterations, initial state and limits).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import time
 import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -25,18 +25,18 @@ from ibik_pin.limits import JointLimits
 from ibik_pin.model import BodyModel
 from ibik_pin.solvers import LevelReport, SolveResult, make_solver
 from ibik_pin.tasks import FramePositionTask, ImageTask, PostureTask
-from ibik_pin.tasks.base import GradientTask, Task
+from ibik_pin.tasks.base import GradientTask
 from ibik_pin.tasks.segments import SegmentCriterion
 from ibik_pin.tasks.silhouette_axis import SilhouetteAxisTask
 from ibik_pin.tasks.weighted_sum import WeightedSum
 from ibik_pin.tracking.first_frame import solve_first_frame
+from ibik_pin.tracking.levels import StackPlan, StackTasks
+from ibik_pin.tracking.outcomes import LevelOutcome, level_outcomes
+from ibik_pin.tracking.stack import CRITERIA, Stack
 from ibik_pin.tracking.swivel import LIMB_ENDS, SwivelSearch, views_cross
 from ibik_pin.tracking.views import axis_views, initial_configuration, make_views, support_caps
 from ibik_pin.vision.segmentation import TemporalMajority
 
-LOWER_BODY = {"Hip", "LHip", "RHip", "LKnee", "RKnee", "LAnkle", "RAnkle", "LBigToe", "LSmallToe",
-              "LHeel", "RBigToe", "RSmallToe", "RHeel"}
-CRITERIA = ("paper", "two-way")
 IMAGE_MOVES = ("limbs", "all")
 # Foot points and the ankle each belongs to (see Tracker._foot_point_joints).
 FOOT_POINT_ANKLES = {f"{side}{point}": f"{side}Ankle" for side in "LR" for point in ("BigToe", "SmallToe", "Heel")}
@@ -84,6 +84,9 @@ class TrackingSettings:
             (BodyModel.limb_coordinates) for the steps with the image, so the image moves only
             the arms and legs; "all": the paper's scheme, every step with every level.
         target_iterations: the targets-only steps of each frame with image_moves="limbs".
+        stack: the priority levels and their tasks (tracking.stack); None: Stack.default(). An
+            image task's criterion, step and views, when the stack gives them, replace
+            `criterion`, `image_step` and the cameras; a posture task's weight `posture_weight`.
     """
 
     method: str = "qp"
@@ -102,6 +105,7 @@ class TrackingSettings:
     feet_by_ankle: bool = True
     image_moves: str = "limbs"
     target_iterations: int = 5
+    stack: Stack | None = None
 
 
 @dataclass
@@ -120,17 +124,21 @@ class TrackingResult:
             over the skeleton's sample points of the capped signed-distance support [px].
         inside_fraction: (F, V) the fraction of those sample points that project inside the
             silhouette (support > 0) [0-1], NaN where disabled.
+        camera_names: the cameras whose images were read, in the order of overlap's columns
+            (empty when blind).
         limit_hits: per frame, the joints at a limit.
         dropped_targets: per frame, the targets absent (NaN) in that frame.
         disabled_views: per frame, the cameras whose silhouette was empty.
         solve_seconds: wall time of the solves alone [s].
-        level_names: the L priority levels of each frame's solve, highest first: "lower-body
-            targets", "upper-body targets", "image" (when the image is used), "posture".
-        level_reports: per frame, per level (L), the solver's report of the frame solve's last
-            step: status ("solved", "relaxed", "failed", "empty") and residual (NaN for the image
-            level, which reports its criterion instead). With `swivel_search`, the solve that
-            follows the swivel hints, the hints' own level left out (image_moves="all": the main
-            solve, before the swivel pass).
+        level_names: the L levels of the stack, highest first (the default stack's: "lower-body
+            targets", "upper-body targets", "image" (when the image is used), "posture").
+        level_reports: per frame, per level handed to the solver (one per strict stack level, one
+            per run of weighted ones), the solver's report of the frame solve's last step: status
+            ("solved", "relaxed", "failed", "empty") and residual (NaN for the image level, which
+            reports its criterion instead). With `swivel_search`, the frame's main solve, before
+            the swivel pass.
+        level_outcomes: per frame, per stack level (L), its status, residual, criterion and how
+            much of it the levels above sacrificed, at the frame's solution (tracking.outcomes).
     """
 
     q: np.ndarray
@@ -146,7 +154,9 @@ class TrackingResult:
     target_distances: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     level_names: list[str] = field(default_factory=list)
     level_reports: list[list[LevelReport]] = field(default_factory=list)
+    level_outcomes: list[list[LevelOutcome]] = field(default_factory=list)
     inside_fraction: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    camera_names: list[str] = field(default_factory=list)
 
     @property
     def frames_per_second(self) -> float:
@@ -158,12 +168,18 @@ class Tracker:
 
     def __init__(self, body: BodyModel, cameras: Sequence = (), settings: TrackingSettings | None = None):
         self.body = body
-        self.cameras = list(cameras)
-        self.settings = settings or TrackingSettings()
+        settings = settings or TrackingSettings()
+        self.stack = settings.stack or Stack.default()
+        self.stack.check_names(body.keypoints, [camera.name for camera in cameras] if cameras else None)
+        image = self.stack.image
+        # The stack's image task, where it says, overrides the settings and picks the cameras.
+        self.settings = replace(settings, criterion=image.criterion or settings.criterion,
+                                image_step=image.step or settings.image_step) if image else settings
+        self.cameras = [camera for camera in cameras if image is None or image.views is None
+                        or camera.name in image.views]
         model = body.model
         self.limits = JointLimits(model)
         self.solver = make_solver(self.settings.method, limits=self.limits)
-        self.posture = PostureTask(model, weight=self.settings.posture_weight)
         self.image_task = ImageTask(body, (), samples_per_segment=self.settings.samples_per_segment,
                                     max_step_size=self.settings.image_step)
         if self.settings.criterion not in CRITERIA:
@@ -184,12 +200,17 @@ class Tracker:
         if int(self.settings.target_iterations) < 1:
             raise InputError(f"target_iterations: expected at least 1, found {self.settings.target_iterations}")
         held = ~body.limb_coordinates
-        # Holds the trunk during the image steps (see _solve); None when the image may move everything.
+        # Holds the trunk during the image steps (_solve). A strict level: ik and liegeois, which merge
+        # every level above the image into one task (eq. 3, 4), run the paper's scheme instead.
         self._trunk_hold = (PostureTask(model, coordinates=held)
-                            if self.settings.image_moves == "limbs" and held.any() else None)
+                            if self.settings.image_moves == "limbs" and held.any()
+                            and self.solver.name in ("qp", "stack") else None)
         # The cameras are fixed for the tracker's life, so whether the search can run is decided once.
         self._search_swivels = self.settings.swivel_search and views_cross(self.cameras)
-        self._target_tasks: dict[str, FramePositionTask] = {}
+        # Whether the image is followed: asked for, cameras to read, and a level of the stack for it.
+        self.use_image = self.settings.use_image and bool(self.cameras) and image is not None
+        self.tasks = StackTasks(self.stack, body, self.image_criterion if self.use_image else None,
+                                self.settings.posture_weight, self._foot_point_joints)
         self._hint_tasks: dict[str, FramePositionTask] = {}
 
     def _swivel_hints(self, configuration: Configuration, free: Sequence[str]) -> list[FramePositionTask]:
@@ -203,18 +224,7 @@ class Tracker:
             tasks.append(self._hint_tasks[name])
         return tasks
 
-    def _with_hints(self, levels: list[list], hints: list[FramePositionTask]) -> tuple[list[list], int | None]:
-        """The levels with the hints as a level of their own, and that level's index (None: no hint).
-
-        The hints rank below every end effector, so a hint that cannot be met bends nothing else,
-        and above the image level, whose local climb would otherwise take the joint back.
-        """
-        if not hints:
-            return levels, None
-        targets = [level for level in levels if self.image_criterion not in level and self.posture not in level]
-        return [*targets, hints, [self.image_criterion], [self.posture]], len(targets)
-
-    def _solve(self, configuration: Configuration, levels: list[list], iterations: int | None = None,
+    def _solve(self, configuration: Configuration, plan: StackPlan, iterations: int | None = None,
                free: Sequence[str] = ()) -> SolveResult:
         """One frame's solve from configuration.q (`iterations` steps, default the settings').
 
@@ -229,43 +239,32 @@ class Tracker:
         leaves it exactly that.
 
         With the swivel search, `free` names the elbows and knees that are not targets this frame:
-        their circles are searched once the targets are met (after the targets-only steps; with
-        image_moves="all", after the solve, which is then run again with the hints).
+        their circles are searched once the targets are met, and the hints are a level just above
+        the image's (StackPlan.with_level_above_image; with image_moves="all", the search follows
+        the solve, which is then run again with the hints).
 
-        Returns the solve's result, its level reports those of `levels` (no hold, no hints).
+        Returns the solve's result, its level reports those of plan.solver_levels (no hold, no hints).
         """
         iterations = self.settings.iterations if iterations is None else iterations
-        if not any(self.image_criterion in level for level in levels):
+        levels = plan.solver_levels
+        if plan.image_level is None:
             return self.solver.solve(configuration, levels, iterations=iterations)
         search = self._search_swivels and bool(free)
         if self._trunk_hold is None:
             solved = self.solver.solve(configuration, levels, iterations=iterations)
-            hinted, _ = self._with_hints(levels, self._swivel_hints(configuration, free) if search else [])
-            if hinted is not levels:
-                self.solver.solve(configuration, hinted, iterations=iterations)
+            hints = self._swivel_hints(configuration, free) if search else []
+            if hints:
+                self.solver.solve(configuration, plan.with_level_above_image(hints), iterations=iterations)
             return solved
-        blind = [level for level in levels if self.image_criterion not in level]
-        self.solver.solve(configuration, blind, iterations=int(self.settings.target_iterations))
+        self.solver.solve(configuration, plan.blind_levels(), iterations=int(self.settings.target_iterations))
         self._trunk_hold.set_reference(configuration.q)
-        hinted, hint_level = self._with_hints(levels, self._swivel_hints(configuration, free) if search else [])
+        hints = self._swivel_hints(configuration, free) if search else []
+        hinted = plan.with_level_above_image(hints) if hints else levels
         solved = self.solver.solve(configuration, [[self._trunk_hold], *hinted], iterations=iterations)
         reports = solved.levels[1:]
-        if hint_level is not None:
-            del reports[hint_level]
+        if hints:
+            del reports[plan.image_level]  # the hints' level, inserted just above the image's
         return dataclasses.replace(solved, levels=reports)
-
-    def _levels(self, names: list[str]) -> list[list]:
-        for name in names:
-            if name not in self._target_tasks:
-                self._target_tasks[name] = FramePositionTask(self.body.model, self.body.keypoints[name],
-                                                             driven=self._foot_point_joints(name))
-        lower: list[Task | GradientTask] = [self._target_tasks[n] for n in names if n in LOWER_BODY]
-        upper: list[Task | GradientTask] = [self._target_tasks[n] for n in names if n not in LOWER_BODY]
-        levels = [lower, upper]
-        if self.settings.use_image and self.cameras:
-            levels.append([self.image_criterion])
-        levels.append([self.posture])
-        return levels
 
     def _foot_point_joints(self, name: str) -> np.ndarray | None:
         """For a toe or heel target: the joints that move it but not its ankle at the neutral pose
@@ -287,11 +286,6 @@ class Tracker:
         moves = np.linalg.norm(configuration.frame_translation_jacobian(self.body.frame_id(name)), axis=0) > 1e-9
         moves_ankle = np.linalg.norm(configuration.frame_translation_jacobian(self.body.frame_id(ankle)), axis=0) > 1e-9
         return moves & ~moves_ankle
-
-    def _level_names(self) -> list[str]:
-        """What each level of `_levels` holds, in the same order."""
-        image = ["image"] if self.settings.use_image and self.cameras else []
-        return ["lower-body targets", "upper-body targets", *image, "posture"]
 
     def track(
         self,
@@ -317,7 +311,7 @@ class Tracker:
         targets = np.asarray(targets, dtype=float)
         if targets.ndim != 3 or targets.shape[1:] != (len(names), 3):
             raise InputError(f"targets must have shape (F, {len(names)}, 3), got {targets.shape}")
-        use_image = self.settings.use_image and bool(self.cameras)
+        use_image = self.use_image
         frame_count = targets.shape[0]
         # The silhouettes the image level reads (temporally filtered if asked); None without the image.
         source: SilhouetteSource | None = None
@@ -327,7 +321,9 @@ class Tracker:
             source = silhouettes
             if self.settings.mask_filter_radius > 0:
                 source = TemporalMajority(silhouettes, frame_count, self.settings.mask_filter_radius)
-        levels = self._levels(names)
+        plan = self.tasks.plan(names)
+        levels = plan.solver_levels
+        report_index = plan.report_index(self.solver)
         keypoint_names = list(self.body.keypoints)
         keypoint_ids = self.body.frame_ids(keypoint_names)
         result = TrackingResult(
@@ -339,7 +335,8 @@ class Tracker:
             target_distances=np.full((frame_count, len(names)), np.nan),
             overlap=np.full((frame_count, len(self.cameras)), np.nan),
             inside_fraction=np.full((frame_count, len(self.cameras)), np.nan),
-            level_names=self._level_names(),
+            level_names=plan.names,
+            camera_names=[camera.name for camera in self.cameras] if use_image else [],
         )
         configuration = Configuration(self.body.model, initial_configuration(self.body, names, targets[0]))
         caps = support_caps(self.cameras, configuration.q[:3]) if use_image else []
@@ -347,7 +344,7 @@ class Tracker:
         for frame in range(frame_count):
             present = np.all(np.isfinite(targets[frame]), axis=1)
             for k, name in enumerate(names):
-                self._target_tasks[name].set_target(targets[frame, k] if present[k] else None)
+                self.tasks.target_tasks[name].set_target(targets[frame, k] if present[k] else None)
             result.dropped_targets.append([n for n, p in zip(names, present, strict=True) if not p])
             disabled: list[str] = []
             if source is not None:  # the image is used
@@ -359,16 +356,18 @@ class Tracker:
                     if self.settings.criterion == "two-way":
                         self.axis_task.set_views(axis_views(self.cameras, masks, axis_scales))
             result.disabled_views.append(disabled)
+            self.tasks.start_frame(configuration)
             # The elbows and knees this frame leaves to the image (for the swivel search).
             free = [name for name in LIMB_ENDS if name not in names or not present[names.index(name)]]
             started = time.perf_counter()
             if frame == 0:
-                solved = solve_first_frame(self.solver, configuration, levels,
-                                           self.image_criterion if use_image else None,
+                solved = solve_first_frame(self.solver, configuration, levels, plan.image_criterion,
                                            self.settings.first_frame_iterations, self.settings.first_frame_starts,
-                                           solve=functools.partial(self._solve, free=free))
+                                           blind_levels=plan.blind_levels(),
+                                           solve=lambda configuration, _levels, iterations, free=free: self._solve(
+                                               configuration, plan, iterations, free=free))
             else:
-                solved = self._solve(configuration, levels, free=free)
+                solved = self._solve(configuration, plan, free=free)
             result.level_reports.append(solved.levels)
             result.solve_seconds += time.perf_counter() - started
             result.q[frame] = configuration.q
@@ -376,12 +375,14 @@ class Tracker:
             for k, name in enumerate(names):
                 if present[k]:
                     result.target_distances[frame, k] = np.linalg.norm(
-                        self._target_tasks[name].compute_error(configuration))
+                        self.tasks.target_tasks[name].compute_error(configuration))
             errors = result.target_distances[frame, present]
             result.target_residuals[frame] = np.mean(errors) if errors.size else np.nan
             if use_image:
                 result.overlap[frame], result.inside_fraction[frame] = self._overlap_per_view(configuration, disabled)
             result.limit_hits.append(self.limits.at_limit(configuration.q))
+            result.level_outcomes.append(level_outcomes(plan, configuration, solved.levels, report_index,
+                                                        self.solver.damping))
             if progress is not None:
                 progress()
         return result
@@ -397,4 +398,3 @@ class Tracker:
             values = view.support.sample(view.camera.project(points)).values
             overlap[index], inside[index] = float(np.mean(values)), float(np.mean(values > 0.0))
         return overlap, inside
-
