@@ -91,8 +91,10 @@ class BuiltinTracker(Tracker):
 def test_the_default_stack_file_gives_the_same_joints_as_the_built_in_levels(walk, default_run):
     _, result = default_run
     _, reference = walk.track(tracker_type=BuiltinTracker)
-    assert np.array_equal(result.q, reference.q)  # bit-identical, not merely close
-    assert np.array_equal(result.keypoints, reference.keypoints)
+    # Bit-identical when run alone (measured: 0.0); once in the full suite (CI) the last bits differed,
+    # from the order of floating-point sums in the linear algebra, so the test allows 1e-6 [rad, m].
+    np.testing.assert_allclose(result.q, reference.q, rtol=0.0, atol=1e-6)
+    np.testing.assert_allclose(result.keypoints, reference.keypoints, rtol=0.0, atol=1e-6)
     # The run is a real one: the image moved the solution away from the blind one.
     _, blind = walk.track(use_image=False)
     assert np.abs(blind.keypoints - result.keypoints).max() > 1e-3
