@@ -10,6 +10,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import sys
+import xml.etree.ElementTree as ElementTree
 from dataclasses import dataclass, field
 from importlib import resources
 from itertools import pairwise
@@ -19,6 +20,7 @@ import numpy as np
 import pinocchio as pin
 
 from ibik_pin.exceptions import FileFormatError, InputError, UnknownNameError
+from ibik_pin.feet import add_foot_rotation
 
 HUMAN_URDF_RELATIVE = Path("example-robot-data/robots/human_description/robots/human.urdf")
 #: Links of this prefix in a URDF are keypoints (``keypoint_Neck`` is the Neck), see load_human.
@@ -121,6 +123,22 @@ def human_urdf_path() -> Path:
     )
 
 
+def human_urdf_tree(path: str | Path) -> ElementTree.ElementTree[ElementTree.Element[str]]:
+    """A human URDF parsed, with the foot rotation joints added (see add_foot_rotation).
+
+    Raises:
+        FileFormatError: the file cannot be read or is not XML.
+    """
+    if not Path(path).is_file():
+        raise FileFormatError(f"URDF file {str(path)!r} does not exist")
+    try:
+        tree = ElementTree.parse(path)
+    except (OSError, ElementTree.ParseError) as error:
+        raise FileFormatError(f"URDF {str(path)!r} cannot be read: {error}") from error
+    add_foot_rotation(tree.getroot())
+    return tree
+
+
 def add_keypoint_frame(model: pin.Model, name: str, parent_joint: str, offset: np.ndarray) -> None:
     """Add an operational frame `name` at `offset` [m] in the frame of joint `parent_joint`."""
     if not model.existJointName(parent_joint):
@@ -187,7 +205,8 @@ HUMAN_END_EFFECTORS = ["Hip", "LAnkle", "RAnkle", "LWrist", "RWrist", "Head"]
 
 
 def load_human(urdf_path: str | Path | None = None, free_flyer: bool = True) -> BodyModel:
-    """The whole-body human: example-robot-data's 36-DOF ISB model with Pose2Sim keypoints.
+    """The whole-body human: example-robot-data's 36-DOF ISB model with Pose2Sim keypoints, and a
+    third degree of freedom at each ankle (:func:`add_foot_rotation`): 38 in all.
 
     A URDF with keypoint links (links named ``keypoint_<Name>``, as
     :func:`ibik_pin.subject.urdf.write_subject_urdf` writes a calibrated subject) gives its
@@ -197,10 +216,15 @@ def load_human(urdf_path: str | Path | None = None, free_flyer: bool = True) -> 
 
     Args:
         urdf_path: another URDF with the same joint names; default the installed human.urdf.
-        free_flyer: add the 6-DOF floating base (43 coordinates, 42 velocities).
+        free_flyer: add the 6-DOF floating base (45 coordinates, 44 velocities).
     """
     path = Path(urdf_path) if urdf_path is not None else human_urdf_path()
-    model = load_urdf(path, free_flyer=free_flyer)
+    xml = ElementTree.tostring(human_urdf_tree(path).getroot(), encoding="unicode")
+    try:
+        model = (pin.buildModelFromXML(xml, pin.JointModelFreeFlyer()) if free_flyer
+                 else pin.buildModelFromXML(xml))
+    except (RuntimeError, ValueError) as error:
+        raise FileFormatError(f"URDF file {str(path)!r} cannot be parsed: {error}") from error
     model.name = "human"
     # name -> (link frame index, parent joint, placement), copied: addFrame reallocates the frames
     calibrated = {frame.name[len(KEYPOINT_LINK_PREFIX):]: (index, int(frame.parentJoint), frame.placement.copy())

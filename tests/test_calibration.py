@@ -177,7 +177,7 @@ def test_the_saved_urdf_reloads_with_the_same_keypoints(recovery, tmp_path):
     assert reloaded.calibrated
     assert list(reloaded.keypoints) == list(result.body.keypoints)
     rng = np.random.default_rng(1)
-    for q in (pin.neutral(reloaded.model), pin.randomConfiguration(reloaded.model, -np.ones(43), np.ones(43))):
+    for q in (pin.neutral(reloaded.model), pin.randomConfiguration(reloaded.model, -np.ones(45), np.ones(45))):
         q[:3] = rng.normal(size=3)
         first, second = result.body.model.createData(), reloaded.model.createData()
         pin.framesForwardKinematics(result.body.model, first, q)

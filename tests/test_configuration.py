@@ -35,8 +35,8 @@ def test_update_gives_a_new_version_and_refreshes_positions(human, rng):
 
 
 def test_a_configuration_of_the_wrong_size_is_refused(human):
-    with pytest.raises(InputError, match=r"shape \(43,\)"):
-        Configuration(human.model, np.zeros(36))
+    with pytest.raises(InputError, match=r"shape \(45,\)"):
+        Configuration(human.model, np.zeros(38))
 
 
 def test_a_non_finite_configuration_is_refused(human):

@@ -30,7 +30,7 @@ HUMAN_BVH_GROUPS = {
     "root": ["root_joint"],
     "left_hip": ["left_hip_Z", "left_hip_X", "left_hip_Y"],
     "left_knee": ["left_knee_Z"],
-    "left_ankle": ["left_ankle_Z", "left_ankle_X"],
+    "left_ankle": ["left_ankle_Y", "left_ankle_Z", "left_ankle_X"],
     "middle_lumbar": ["middle_lumbar_Z", "middle_lumbar_X"],
     "middle_thoracic": ["middle_thoracic_Z", "middle_thoracic_X", "middle_thoracic_Y"],
     "left_clavicle": ["left_clavicle_joint_X"],
@@ -44,7 +44,7 @@ HUMAN_BVH_GROUPS = {
     "right_wrist": ["right_wrist_Z", "right_wrist_X"],
     "right_hip": ["right_hip_Z", "right_hip_X", "right_hip_Y"],
     "right_knee": ["right_knee_Z"],
-    "right_ankle": ["right_ankle_Z", "right_ankle_X"],
+    "right_ankle": ["right_ankle_Y", "right_ankle_Z", "right_ankle_X"],
 }
 HUMAN_BVH_END_SITES = {
     "left_ankle_end": "LBigToe",
@@ -115,7 +115,7 @@ def test_mot_is_read_by_read_mot_in_degrees_with_a_column_per_coordinate(
     joint_count = human.model.njoints - 2  # the universe and the free flyer excluded
     assert data.header["inDegrees"] == "yes"
     assert data.in_degrees
-    assert int(data.header["nColumns"]) == 1 + 6 + joint_count == 43
+    assert int(data.header["nColumns"]) == 1 + 6 + joint_count == 45
     assert data.column_names[:6] == [
         "pelvis_tx", "pelvis_ty", "pelvis_tz", "pelvis_tilt", "pelvis_list", "pelvis_rotation"
     ]
@@ -208,9 +208,9 @@ def test_bvh_of_a_model_without_free_flyer_keeps_its_root_at_the_world_origin(rn
 def test_exports_name_the_wrong_configuration_shape(human, tmp_path):
     q = np.zeros((FRAME_COUNT, human.model.nq - 1))
 
-    with pytest.raises(InputError, match=r"q: expected shape \(F, 43\)"):
+    with pytest.raises(InputError, match=r"q: expected shape \(F, 45\)"):
         write_model_bvh(tmp_path / "motion.bvh", human, q, FRAME_TIME)
-    with pytest.raises(InputError, match=r"q: expected shape \(F, 43\)"):
+    with pytest.raises(InputError, match=r"q: expected shape \(F, 45\)"):
         write_q_csv(tmp_path / "q.csv", human.model, np.zeros(FRAME_COUNT), q)
     assert list(tmp_path.iterdir()) == []
 

@@ -191,7 +191,8 @@ def test_the_liegeois_scheme_takes_a_primary_task_and_the_image(walk):
     assert statuses <= {"solved", "relaxed"}
     # Eq. (4) solves the targets as the strict stack does, one level instead of two.
     _, stack = walk.track(two_levels, method="stack")
-    assert np.nanmean(result.target_residuals) == pytest.approx(np.nanmean(stack.target_residuals), rel=0.2)
+    assert np.nanmean(result.target_residuals) <= 1.2 * np.nanmean(stack.target_residuals)
+    assert np.nanmean(stack.target_residuals) < 0.005
 
 
 def test_levels_below_the_image_are_reported_empty_under_liegeois(walk):

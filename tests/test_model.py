@@ -2,6 +2,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import FileFormatError, IbikError, InputError, UnknownNameError
 from ibik_pin.model import (
     human_urdf_path,
@@ -20,9 +21,10 @@ def test_the_human_comes_from_the_installed_example_robot_data():
     assert "example-robot-data" in str(path)
 
 
-def test_the_human_has_36_joints_and_a_free_flyer(human):
-    assert human.model.nq == 43
-    assert human.model.nv == 42
+def test_the_human_has_38_joints_and_a_free_flyer(human):
+    # example-robot-data's 36 and the third axis of each ankle (ibik_pin.feet)
+    assert human.model.nq == 45
+    assert human.model.nv == 44
 
 
 def test_the_limbs_of_the_human_are_its_arms_and_legs(human):
@@ -32,13 +34,13 @@ def test_the_limbs_of_the_human_are_its_arms_and_legs(human):
     assert not_limbs == {"root_joint", "middle_lumbar_Z", "middle_lumbar_X", "middle_thoracic_Z", "middle_thoracic_X",
                          "middle_thoracic_Y", "left_clavicle_joint_X", "right_clavicle_joint_X",
                          "middle_cervical_Z", "middle_cervical_X", "middle_cervical_Y"}
-    assert limbs.sum() == 26  # 2 x (3 shoulder + 2 elbow + 2 wrist) + 2 x (3 hip + 1 knee + 2 ankle)
+    assert limbs.sum() == 28  # 2 x (3 shoulder + 2 elbow + 2 wrist) + 2 x (3 hip + 1 knee + 3 ankle)
     assert load_arm().limb_coordinates.all()
 
 
 def test_the_human_loads_without_a_free_flyer_too():
     body = load_human(free_flyer=False)
-    assert body.model.nv == 36
+    assert body.model.nv == 38
     assert body.frame_id("Hip") >= 0
 
 
@@ -140,3 +142,36 @@ def test_a_keypoint_link_named_after_a_frame_is_refused(tmp_path):
     path = human_with_keypoint_links(tmp_path, {"middle_pelvis": ("middle_pelvis", (0.0, 0.0, 0.0))})
     with pytest.raises(FileFormatError, match="keypoint_middle_pelvis"):
         load_human(path)
+
+
+def test_each_ankle_turns_the_foot_outwards_about_the_shank_within_its_limits(human):
+    from ibik_pin.feet import FOOT_ROTATION_LIMIT_RAD
+
+    model = human.model
+    for side, letter, outwards in [("left", "L", -1.0), ("right", "R", 1.0)]:  # the left side is at -Z
+        joint = model.getJointId(f"{side}_ankle_Y")
+        index = model.joints[joint].idx_q
+        assert model.names[model.parents[joint]] == f"{side}_knee_Z"
+        assert model.names[joint + 1] == f"{side}_ankle_Z"
+        assert (model.lowerPositionLimit[index], model.upperPositionLimit[index]) == (-FOOT_ROTATION_LIMIT_RAD,
+                                                                                      FOOT_ROTATION_LIMIT_RAD)
+        q = pin.neutral(model)
+        before = Configuration(model, q).frame_position(human.frame_id(f"{letter}BigToe")).copy()
+        ankle = Configuration(model, q).frame_position(human.frame_id(f"{letter}Ankle")).copy()
+        q[index] = 0.3
+        after = Configuration(model, q)
+        moved = after.frame_position(human.frame_id(f"{letter}BigToe")) - before
+        assert outwards * moved[2] > 0.03  # toes out by the turn times the foot's length
+        assert abs(moved[1]) < 1e-12  # about the vertical shank: the toe keeps its height
+        np.testing.assert_allclose(after.frame_position(human.frame_id(f"{letter}Ankle")), ankle, atol=1e-12)
+
+
+def test_the_foot_rotation_is_added_once_to_a_subject_urdf_written_and_read_back(human, tmp_path):
+    from ibik_pin.subject.urdf import write_subject_urdf
+
+    write_subject_urdf(human, tmp_path / "subject.urdf")
+    text = (tmp_path / "subject.urdf").read_text()
+    assert text.count('name="left_ankle_Y"') == 1 and text.count('name="right_ankle_Y"') == 1
+    reloaded = load_human(tmp_path / "subject.urdf")
+    assert reloaded.model.nq == human.model.nq
+    assert [reloaded.model.names[j] for j in range(reloaded.model.njoints)] == list(human.model.names)

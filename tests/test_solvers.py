@@ -148,18 +148,24 @@ def test_an_unreachable_level_is_reported_relaxed_and_the_higher_one_solved(huma
 
 
 def test_ik_ignores_the_gradient_level_and_liegeois_uses_it(human):
+    # Gradient steps in the null space end at another solution of the targets than plain IK's, not
+    # always a higher one (on about 1 start in 10 the path ends lower), so the test takes 8 starts.
     rng = np.random.default_rng(9)
-    levels = human_levels(human, random_human_configuration(human, rng, spread=0.4))
-    levels = [levels[0] + levels[1], [FrameHeight(human, "RElbow")]]
-    start = random_human_configuration(human, rng, spread=0.4)
-    heights = {}
-    for solver in [DampedLeastSquaresSolver(), LiegeoisSolver()]:
-        configuration = Configuration(human.model, start)
-        solver.solve(configuration, levels, iterations=40)
-        heights[solver.name] = configuration.frame_position(human.frame_id("RElbow"))[1]
-        errors = [np.linalg.norm(task.compute_error(configuration)) for task in levels[0]]
-        assert max(errors) < 1e-3
-    assert heights["liegeois"] > heights["ik"] + 0.005
+    gains = []
+    for _ in range(8):
+        levels = human_levels(human, random_human_configuration(human, rng, spread=0.4))
+        levels = [levels[0] + levels[1], [FrameHeight(human, "RElbow")]]
+        start = random_human_configuration(human, rng, spread=0.4)
+        heights = {}
+        for solver in [DampedLeastSquaresSolver(), LiegeoisSolver()]:
+            configuration = Configuration(human.model, start)
+            solver.solve(configuration, levels, iterations=40)
+            heights[solver.name] = configuration.frame_position(human.frame_id("RElbow"))[1]
+            errors = [np.linalg.norm(task.compute_error(configuration)) for task in levels[0]]
+            assert max(errors) < 1e-3
+        gains.append(heights["liegeois"] - heights["ik"])
+    assert np.median(gains) > 0.02
+    assert sum(gain > 0.005 for gain in gains) >= 6
 
 
 def test_a_gradient_task_must_be_alone_in_its_level(human):

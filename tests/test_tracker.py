@@ -45,7 +45,8 @@ def test_blind_tracking_reaches_every_target_of_every_frame(human, sequence):
 
 def test_every_frame_keeps_the_solvers_report_of_each_level(human, sequence):
     _, targets = sequence
-    result = Tracker(human, settings=fast_settings()).track(TARGETS, targets)
+    # 20 steps: with 10 the upper level ends some 1e-6 m short on most seeds, reported "relaxed"
+    result = Tracker(human, settings=fast_settings(iterations=20)).track(TARGETS, targets)
     assert result.level_names == ["lower-body targets", "upper-body targets", "posture"]
     assert len(result.level_reports) == FRAMES
     for reports in result.level_reports:

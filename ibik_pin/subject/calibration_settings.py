@@ -33,8 +33,8 @@ SCALE_GROUPS: dict[str, tuple[tuple[str, tuple[float, float, float]], ...]] = {
     "pelvis_width": (("left_hip_Z", _LATERAL), ("right_hip_Z", _LATERAL)),
     "left_thigh": (("left_knee_Z", _ALL),),
     "right_thigh": (("right_knee_Z", _ALL),),
-    "left_shank": (("left_ankle_Z", _ALL),),
-    "right_shank": (("right_ankle_Z", _ALL),),
+    "left_shank": (("left_ankle_Y", _ALL),),
+    "right_shank": (("right_ankle_Y", _ALL),),
     "trunk": (
         ("left_hip_Z", _SAGITTAL),
         ("right_hip_Z", _SAGITTAL),

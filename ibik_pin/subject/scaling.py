@@ -13,7 +13,7 @@ the midpoint of LHip and RHip):
 name           keypoints                  what of the model changes
 ============== ========================== =====================================================
 left_thigh     LHip -> LKnee              knee joint placement (along its offset)
-left_shank     LKnee -> LAnkle            ankle joint placement
+left_shank     LKnee -> LAnkle            ankle joint placement (ankle_Y, the first of three)
 left_foot      LAnkle -> LBigToe          forward (X) offsets of the foot keypoint frames (toes,
                                           heel): a longer foot, the same ankle height
 left_upper_arm LShoulder -> LElbow        elbow joint placement
@@ -349,7 +349,7 @@ def _edits(body: BodyModel, name: str) -> list[_Edit]:
     frame = body.keypoints.get
     side = name.split("_")[0]  # "left" or "right" for the paired lengths
     if name.endswith(("_thigh", "_shank", "_upper_arm", "_forearm")):
-        joint = {"thigh": "knee_Z", "shank": "ankle_Z", "upper_arm": "elbow_Z", "forearm": "wrist_Z"}
+        joint = {"thigh": "knee_Z", "shank": "ankle_Y", "upper_arm": "elbow_Z", "forearm": "wrist_Z"}
         return [_Edit("joint", f"{side}_{joint[name.split('_', 1)[1]]}")]
     if name.endswith("_foot"):
         prefix = side[0].upper()

@@ -23,7 +23,8 @@ import numpy as np
 import pinocchio as pin
 
 from ibik_pin.exceptions import FileFormatError, InputError
-from ibik_pin.model import KEYPOINT_LINK_PREFIX, BodyModel, human_urdf_path
+from ibik_pin.io.urdf import urdf_numbers, urdf_origin
+from ibik_pin.model import KEYPOINT_LINK_PREFIX, BodyModel, human_urdf_path, human_urdf_tree
 
 __all__ = ["write_subject_urdf"]
 
@@ -48,10 +49,7 @@ def write_subject_urdf(body: BodyModel, path: str | Path) -> list[str]:
         InputError: a joint of the source URDF is missing from the body's model.
     """
     source = Path(body.urdf_path) if body.urdf_path is not None else human_urdf_path()
-    try:
-        tree = ElementTree.parse(source)
-    except (OSError, ElementTree.ParseError) as error:
-        raise FileFormatError(f"URDF {str(source)!r} cannot be read: {error}") from error
+    tree = human_urdf_tree(source)
     robot = tree.getroot()
     _remove_keypoint_links(robot)
     model = body.model
@@ -81,7 +79,7 @@ def write_subject_urdf(body: BodyModel, path: str | Path) -> list[str]:
             placement = link_placement(parent).inverse() * model.jointPlacements[model.getJointId(name)]
         else:
             raise InputError(f"body: joint {name!r} of {str(source)!r} is not in the model {model.name!r}")
-        old = _origin(element)
+        old = urdf_origin(element)
         old_lengths[parent] = old_lengths.get(parent, 0.0) + float(np.linalg.norm(old.translation))
         new_lengths[parent] = new_lengths.get(parent, 0.0) + float(np.linalg.norm(placement.translation))
         _set_origin(element, placement)
@@ -101,7 +99,7 @@ def write_subject_urdf(body: BodyModel, path: str | Path) -> list[str]:
             origin = part.find("origin")
             if origin is not None:
                 xyz = np.array([float(v) for v in origin.get("xyz", "0 0 0").split()]) * factor
-                origin.set("xyz", _numbers(xyz))
+                origin.set("xyz", urdf_numbers(xyz))
             mesh = part.find("geometry/mesh")
             if mesh is None:
                 continue
@@ -112,7 +110,7 @@ def write_subject_urdf(body: BodyModel, path: str | Path) -> list[str]:
                 continue
             mesh.set("filename", resolved.as_uri())
             scale = np.array([float(v) for v in mesh.get("scale", "1 1 1").split()]) * factor
-            mesh.set("scale", _numbers(scale))
+            mesh.set("scale", urdf_numbers(scale))
 
     for keypoint, frame_name in body.keypoints.items():
         frame = model.frames[model.getFrameId(frame_name)]
@@ -159,26 +157,12 @@ def _remove_keypoint_links(robot: ElementTree.Element) -> None:
             robot.remove(element)
 
 
-def _origin(element: ElementTree.Element) -> pin.SE3:
-    origin = element.find("origin")
-    if origin is None:
-        return pin.SE3.Identity()
-    xyz = np.array([float(v) for v in origin.get("xyz", "0 0 0").split()])
-    rpy = np.array([float(v) for v in origin.get("rpy", "0 0 0").split()])
-    return pin.SE3(pin.rpy.rpyToMatrix(rpy), xyz)
-
-
 def _set_origin(element: ElementTree.Element, placement: pin.SE3) -> None:
     origin = element.find("origin")
     if origin is None:
         origin = ElementTree.SubElement(element, "origin")
-    origin.set("xyz", _numbers(placement.translation))
-    origin.set("rpy", _numbers(pin.rpy.matrixToRpy(placement.rotation)))
-
-
-def _numbers(values: np.ndarray) -> str:
-    """Space-separated, exact to the double (repr), with -0 written as 0."""
-    return " ".join(repr(float(value) + 0.0) for value in values)
+    origin.set("xyz", urdf_numbers(placement.translation))
+    origin.set("rpy", urdf_numbers(pin.rpy.matrixToRpy(placement.rotation)))
 
 
 def _resolve_mesh(filename: str, source: Path) -> Path | None:

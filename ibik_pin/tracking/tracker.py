@@ -21,6 +21,7 @@ import numpy as np
 
 from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
+from ibik_pin.feet import foot_point_joints
 from ibik_pin.limits import JointLimits
 from ibik_pin.model import BodyModel
 from ibik_pin.solvers import LevelReport, SolveResult, make_solver
@@ -38,8 +39,6 @@ from ibik_pin.tracking.views import axis_views, initial_configuration, make_view
 from ibik_pin.vision.segmentation import TemporalMajority
 
 IMAGE_MOVES = ("limbs", "all")
-# Foot points and the ankle each belongs to (see Tracker._foot_point_joints).
-FOOT_POINT_ANKLES = {f"{side}{point}": f"{side}Ankle" for side in "LR" for point in ("BigToe", "SmallToe", "Heel")}
 
 # A frame's silhouettes: one (H, W) bool mask per camera, in the cameras' order.
 SilhouetteSource = Callable[[int], Sequence[np.ndarray]]
@@ -77,7 +76,7 @@ class TrackingSettings:
             With the trunk held (image_moves) it brought the real-mocap benchmark's boxing elbows
             from about 100 mm to under 20 mm (2 views; README).
         feet_by_ankle: toe and heel targets move only the joints that do not move their ankle
-            (Tracker._foot_point_joints); False lets them move the whole leg, as a plain
+            (ibik_pin.feet.foot_point_joints); False lets them move the whole leg, as a plain
             end-effector target does.
         image_moves: "limbs" (default): each frame first takes `target_iterations` steps on the
             targets alone, then holds the root, spine, clavicles and neck where those left them
@@ -211,7 +210,12 @@ class Tracker:
         self.use_image = self.settings.use_image and bool(self.cameras) and image is not None
         self.tasks = StackTasks(self.stack, body, self.image_criterion if self.use_image else None,
                                 self.settings.posture_weight, self._foot_point_joints)
+
         self._hint_tasks: dict[str, FramePositionTask] = {}
+
+    def _foot_point_joints(self, name: str) -> np.ndarray | None:
+        """The joints a foot point target moves (ibik_pin.feet); None: every joint."""
+        return foot_point_joints(self.body, name) if self.settings.feet_by_ankle else None
 
     def _swivel_hints(self, configuration: Configuration, free: Sequence[str]) -> list[FramePositionTask]:
         """Position tasks that hold each free elbow and knee at its swivel hint (tracking.swivel);
@@ -266,26 +270,6 @@ class Tracker:
             del reports[plan.image_level]  # the hints' level, inserted just above the image's
         return dataclasses.replace(solved, levels=reports)
 
-    def _foot_point_joints(self, name: str) -> np.ndarray | None:
-        """For a toe or heel target: the joints that move it but not its ankle at the neutral pose
-        (the ankle's two and the hip's axial rotation, which turns a straight leg's foot); None for
-        any other target.
-
-        The model's ankle has two degrees of freedom where a foot has more, and a data set's toe
-        is not exactly the model's; a toe target that may move the whole leg turns the hip and
-        swivels the knee to meet it, and with the ankle target it pins all six coordinates of the
-        leg, leaving the knee nothing for the image to move. Driving the foot points by the ankle
-        alone keeps them for what they tell: how the foot is turned. Measured on the real-mocap
-        benchmark (walking, 2 views, 6 knees): IBIK knees 18.3 mm mean with the toes driving the
-        whole leg, 10.7 mm driven this way.
-        """
-        ankle = FOOT_POINT_ANKLES.get(name)
-        if not self.settings.feet_by_ankle or ankle is None or ankle not in self.body.keypoints:
-            return None
-        configuration = Configuration(self.body.model)
-        moves = np.linalg.norm(configuration.frame_translation_jacobian(self.body.frame_id(name)), axis=0) > 1e-9
-        moves_ankle = np.linalg.norm(configuration.frame_translation_jacobian(self.body.frame_id(ankle)), axis=0) > 1e-9
-        return moves & ~moves_ankle
 
     def track(
         self,
