@@ -19,6 +19,8 @@ if __name__ == "__main__" or Path(sys.argv[0]).stem == "ibik":
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse
+import signal
+import threading
 import warnings
 from typing import TYPE_CHECKING
 
@@ -84,12 +86,6 @@ def _job(arguments: argparse.Namespace) -> TrackJob:
     from ibik_pin.tracking.stack import Stack
     from ibik_pin.tracking.tracker import TrackingSettings
 
-    if arguments.iterations < 1:
-        raise IbikError(f"--iterations must be >= 1, got {arguments.iterations}")
-    if arguments.mask_filter < 0:
-        raise IbikError(f"--mask-filter must be >= 0 frames, got {arguments.mask_filter}")
-    if arguments.background is not None and arguments.videos is None:
-        raise IbikError("--background goes with --videos")
     return TrackJob(
         targets=arguments.targets,
         out=arguments.out,
@@ -171,9 +167,19 @@ def _one_line_warning(
     return f"ibik: warning: {' '.join(str(message).split())}\n"
 
 
+class Terminated(BaseException):
+    """SIGTERM, raised where the program is so that every cleanup (the staging folder) runs."""
+
+
+def _raise_terminated(signal_number: int, frame: object) -> None:
+    raise Terminated
+
+
 def main(argv: list[str] | None = None) -> int:
     arguments = build_parser().parse_args(argv)
     warnings.formatwarning = _one_line_warning
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _raise_terminated)
     try:
         if arguments.command == "track":
             from ibik_pin.tracking.pipeline import run_track
@@ -200,6 +206,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("ibik: interrupted", file=sys.stderr)
         return 130
+    except Terminated:
+        print("ibik: terminated", file=sys.stderr)
+        return 143
     return 0
 
 

@@ -21,6 +21,7 @@ import pinocchio as pin
 
 from ibik_pin.exceptions import FileFormatError, InputError, UnknownNameError
 from ibik_pin.feet import add_foot_rotation
+from ibik_pin.io.files import checked_input_file
 
 HUMAN_URDF_RELATIVE = Path("example-robot-data/robots/human_description/robots/human.urdf")
 #: Links of this prefix in a URDF are keypoints (``keypoint_Neck`` is the Neck), see load_human.
@@ -129,8 +130,9 @@ def human_urdf_tree(path: str | Path) -> ElementTree.ElementTree[ElementTree.Ele
     Raises:
         FileFormatError: the file cannot be read or is not XML.
     """
-    if not Path(path).is_file():
+    if not Path(path).exists():
         raise FileFormatError(f"URDF file {str(path)!r} does not exist")
+    path = checked_input_file(path, "URDF")
     try:
         tree = ElementTree.parse(path)
     except (OSError, ElementTree.ParseError) as error:

@@ -157,7 +157,7 @@ def test_bad_track_options_are_refused_before_any_trial(session, capsys):
 
     assert main(["batch", str(root), "--out", str(out), "--iterations", "0"]) == 2
 
-    assert capsys.readouterr().err == "ibik: error: --iterations must be >= 1, got 0\n"
+    assert capsys.readouterr().err == "ibik: error: --iterations: expected a whole number from 1 to 1000, found 0\n"
 
 
 def test_a_root_without_trials_and_workers_with_a_scheduler_are_refused(tmp_path, capsys):

@@ -74,12 +74,17 @@ def test_a_calibrated_subject_is_not_calibrated_again(root, tmp_path):
     assert (tmp_path / "subject.calibration.json").is_file()
 
 
-def test_an_error_not_of_the_package_is_a_failed_row_that_names_its_type(root, tmp_path):
-    (tmp_path / "a_file").write_text("")  # OUTDIR's parent cannot be made: the OSError is not an IbikError
+def test_an_error_not_of_the_package_is_a_failed_row_that_names_its_type(root, tmp_path, monkeypatch):
+    from ibik_pin.tracking import pipeline
 
-    outcome = run_trial("P1/walk_1", job(root, tmp_path / "a_file" / "out"), None)
+    def disk_full(*arguments, **keywords):
+        raise OSError(28, "No space left on device")  # what a full disk gives while writing q.csv
 
-    assert outcome.status == "failed" and outcome.error.startswith("FileExistsError: ")
+    monkeypatch.setattr(pipeline, "write_q_csv", disk_full)
+    outcome = run_trial("P1/walk_1", job(root, tmp_path / "out"), None)
+
+    assert outcome.status == "failed" and outcome.error.startswith("OSError: ")
+    assert not (tmp_path / "out").exists() and not list(tmp_path.glob(".out.*"))  # the staging folder is gone
     assert outcome.seconds is not None and outcome.seconds > 0.0
 
 

@@ -16,7 +16,7 @@ import tomli_w
 
 from ibik_pin.checks import as_finite_array, as_image_size
 from ibik_pin.exceptions import FileFormatError, InputError
-from ibik_pin.io.files import PathLike, write_text_atomically
+from ibik_pin.io.files import PathLike, checked_input_file, write_text_atomically
 from ibik_pin.vision.pinhole import PinholeCamera
 
 if sys.version_info >= (3, 11):
@@ -50,7 +50,7 @@ def read_calibration(path: PathLike) -> list[PinholeCamera]:
             wrong shape or is not finite, ``fisheye = true`` (not supported), two cameras share
             a name, or no camera section; the message names the file, section and key.
     """
-    path = Path(path)
+    path = checked_input_file(path, "calibration")
     try:
         with open(path, "rb") as stream:
             document = tomllib.load(stream)

@@ -9,6 +9,7 @@ failure never leaves a half-written file.
 from __future__ import annotations
 
 import os
+import stat
 import uuid
 import warnings
 from collections.abc import Callable
@@ -25,6 +26,8 @@ __all__ = [
     "PathLike",
     "check_declared_count",
     "is_number",
+    "MAX_INPUT_BYTES",
+    "checked_input_file",
     "read_text",
     "write_atomically",
     "write_text_atomically",
@@ -34,6 +37,32 @@ __all__ = [
 PathLike = str | os.PathLike
 
 _Result = TypeVar("_Result")
+
+
+#: The largest input file read [bytes]: far above any motion, calibration or model file, small
+#: enough that a wrong path (a disk image, /dev/zero) is refused before it fills the memory.
+MAX_INPUT_BYTES = 1 << 30
+
+
+def checked_input_file(path: str | os.PathLike[str], what: str) -> Path:
+    """The path, once it is known to be a regular file of at most MAX_INPUT_BYTES.
+
+    Raises:
+        FileFormatError: it does not exist, is a folder, a FIFO or device (reading one could block
+            or never end), or is larger than the limit.
+    """
+    path = Path(path)
+    try:
+        status = path.stat()
+    except OSError as error:
+        raise FileFormatError(f"{path}: cannot read this {what} file: {error.strerror or error}") from error
+    if not stat.S_ISREG(status.st_mode):
+        kind = "a folder" if stat.S_ISDIR(status.st_mode) else "not a regular file (a pipe, socket or device)"
+        raise FileFormatError(f"{path}: expected a {what} file, found {kind}")
+    if status.st_size > MAX_INPUT_BYTES:
+        raise FileFormatError(f"{path}: {status.st_size / 2**20:.0f} MiB is over the {MAX_INPUT_BYTES >> 20} MiB "
+                              f"limit of an input file; is it really a {what} file?")
+    return path
 
 
 def read_text(path: str | os.PathLike[str], what: str) -> str:
@@ -47,10 +76,12 @@ def read_text(path: str | os.PathLike[str], what: str) -> str:
         Its content, universal newlines.
 
     Raises:
-        FileFormatError: The file is missing, unreadable or not UTF-8 text.
+        FileFormatError: The file is missing, not a regular file, too large, unreadable or not
+            UTF-8 text.
     """
+    path = checked_input_file(path, what)
     try:
-        return Path(path).read_text(encoding="utf-8")
+        return path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as error:
         raise FileFormatError(f"{path}: cannot read this {what} file: {error}") from error
 

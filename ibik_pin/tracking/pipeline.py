@@ -10,7 +10,6 @@ from __future__ import annotations
 import os
 import shutil
 import sys
-import tempfile
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
@@ -35,6 +34,7 @@ from ibik_pin.subject.scaling import (
     segment_lengths_from_keypoints,
 )
 from ibik_pin.tracking.axes import AxesChoice, choose_axes
+from ibik_pin.tracking.outdir import check_outdir, make_staging, publish
 from ibik_pin.tracking.report import TrackingReport
 from ibik_pin.tracking.tracker import Tracker, TrackingResult, TrackingSettings
 from ibik_pin.vision.camera import cameras_in_frame, select_cameras
@@ -50,6 +50,18 @@ CODEC_ALIGNMENT_PX = 16
 # The keypoints joints.trc always holds (estimated ones included), then any other of the model's.
 OUTPUT_KEYPOINTS = ["Hip", "Neck", "Head", "LShoulder", "LElbow", "LWrist", "RShoulder", "RElbow",
                     "RWrist", "LHip", "LKnee", "LAnkle", "RHip", "RKnee", "RAnkle"]
+# Bounds that keep a run finite: at 1000 steps a frame already takes seconds, and a majority vote
+# over more than 61 frames (a second at 60 Hz) is no longer a filter of flicker.
+MAX_ITERATIONS = 1000
+MAX_MASK_FILTER_RADIUS = 30
+
+
+def check_run_bounds(settings: TrackingSettings) -> None:
+    """Refuse step counts and a mask filter outside the bounds above (InputError naming the option)."""
+    for option, value, low, high in (("--iterations", settings.iterations, 1, MAX_ITERATIONS),
+                                     ("--mask-filter", settings.mask_filter_radius, 0, MAX_MASK_FILTER_RADIUS)):
+        if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+            raise InputError(f"{option}: expected a whole number from {low} to {high}, found {value!r}")
 
 
 @dataclass
@@ -74,6 +86,27 @@ class TrackJob:
     overlay: bool = False
     quiet: bool = False
     trc_axes: str = "auto"
+
+    def __post_init__(self) -> None:
+        """Paths given as str become Paths; what the CLI refuses, the API refuses too (InputError)."""
+        for name in ("targets", "out", "static", "calibration", "masks", "videos", "background", "model"):
+            value = getattr(self, name)
+            if value is not None and not isinstance(value, Path):
+                if not isinstance(value, (str, os.PathLike)):
+                    raise InputError(f"TrackJob.{name}: expected a path (str or Path), found {type(value).__name__}")
+                setattr(self, name, Path(value))
+        if self.masks is not None and self.videos is not None:
+            raise InputError("--masks and --videos: give one source of silhouettes, not both")
+        if self.background is not None and self.videos is None:
+            raise InputError("--background goes with --videos")
+        if self.trc_axes not in ("auto", "y-up", "z-up"):
+            raise InputError(f"--trc-axes: expected auto, y-up or z-up, found {self.trc_axes!r}")
+        check_run_bounds(self.settings)
+
+    @property
+    def inputs(self) -> list[Path | None]:
+        """Every input path of the job (None for those not given)."""
+        return [self.targets, self.static, self.calibration, self.masks, self.videos, self.background, self.model]
 
 
 @dataclass
@@ -243,7 +276,23 @@ def _stature(names: list[str], targets_m: np.ndarray) -> float:
 
 
 def run_track(job: TrackJob) -> TrackingReport:
-    """Run the whole job; returns the report that was written to OUTDIR/report.json."""
+    """Run the whole job; returns the report that was written to OUTDIR/report.json.
+
+    OUTDIR is checked first (tracking.outdir), and the outputs go to a staging folder made before
+    any work, so that an OUTDIR that cannot be written is found at once."""
+    out = check_outdir(job.out, job.inputs)
+    staging = make_staging(out)
+    try:
+        report = _run_into(staging, job)
+        publish(staging, out)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return report
+
+
+def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
+    """Read, check, track and write every output into `staging`."""
     trc, targets_trc_m = _trc_in_metres(job.targets)
     names = list(trc.marker_names)
     frame_count = targets_trc_m.shape[0]
@@ -279,30 +328,7 @@ def run_track(job: TrackJob) -> TrackingReport:
         result = tracker.track(names, targets_m, silhouettes.frame if use_image and silhouettes is not None else None,
                                progress=bar.update)
 
-    job.out.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{job.out.name}.", dir=job.out.parent))
-    umask = os.umask(0)
-    os.umask(umask)
-    staging.chmod(0o777 & ~umask)  # mkdtemp's 0700 would make OUTDIR private
-    try:
-        report = write_outputs(staging, job, trc, body, cameras, silhouettes, result, axes)
-        _replace_folder(staging, job.out)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
-    return report
-
-
-def _replace_folder(staging: Path, out: Path) -> None:
-    """Move the finished staging folder to OUTDIR; an existing OUTDIR is replaced only now."""
-    if out.exists():
-        previous = out.with_name(f".{out.name}.previous")
-        shutil.rmtree(previous, ignore_errors=True)
-        os.replace(out, previous)
-        os.replace(staging, out)
-        shutil.rmtree(previous, ignore_errors=True)
-    else:
-        os.replace(staging, out)
+    return write_outputs(staging, job, trc, body, cameras, silhouettes, result, axes)
 
 
 def write_outputs(folder: Path, job: TrackJob, trc: TrcData, body: BodyModel, cameras: list,

@@ -30,7 +30,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from ibik_pin.exceptions import InputError
+from ibik_pin.exceptions import FileFormatError, InputError
+from ibik_pin.io.files import checked_input_file
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -112,10 +113,12 @@ class Stack:
                 a keypoint in two levels, a weight that is not positive, two image tasks, ...;
                 the message names the file, the level and the key.
         """
-        path = Path(path)
         try:
+            path = checked_input_file(path, "stack")
             with open(path, "rb") as stream:
                 document = tomllib.load(stream)
+        except FileFormatError as error:
+            raise StackError(str(error)) from None
         except OSError as error:
             raise StackError(f"stack file {str(path)!r}: cannot be read ({error.strerror or error})") from None
         except tomllib.TOMLDecodeError as error:
