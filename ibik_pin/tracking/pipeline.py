@@ -10,7 +10,6 @@ from __future__ import annotations
 import os
 import shutil
 import sys
-import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -19,10 +18,9 @@ import numpy as np
 from tqdm import tqdm
 
 from ibik_pin.configuration import Configuration
-from ibik_pin.exceptions import FileFormatError, IbikWarning, InputError
+from ibik_pin.exceptions import FileFormatError, InputError
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, read_calibration
 from ibik_pin.io.export import write_model_bvh, write_model_mot, write_q_csv
-from ibik_pin.io.masks import IMAGE_SUFFIXES, list_mask_files, read_mask
 from ibik_pin.io.osim import write_osim_model
 from ibik_pin.io.trc import METRES_PER_UNIT, TrcData, read_trc, write_trc
 from ibik_pin.io.video import VideoReader
@@ -36,17 +34,13 @@ from ibik_pin.subject.scaling import (
 from ibik_pin.tracking.axes import AxesChoice, choose_axes
 from ibik_pin.tracking.outdir import check_outdir, make_staging, publish
 from ibik_pin.tracking.report import TrackingReport
+from ibik_pin.tracking.silhouette_files import Silhouettes, camera_folder_entries, fit_to_size, load_silhouettes
 from ibik_pin.tracking.tracker import Tracker, TrackingResult, TrackingSettings
 from ibik_pin.vision.camera import cameras_in_frame, select_cameras
-from ibik_pin.vision.segmentation import silhouettes_from_video
 from ibik_pin.viz.overlay import write_overlay_video
 from ibik_pin.viz.plots import Panel, plot_panels
 from ibik_pin.viz.replay import write_html_replay
 
-VIDEO_SUFFIXES = {".mp4", ".avi", ".mov", ".mkv", ".m4v"}
-# Encoders round frame sizes to macroblocks of 16 px: a video up to 15 px off its calibration's
-# size (Pose2Sim's demo: 1080 px wide, calibrated at 1088) is the same sensor, anything more is not.
-CODEC_ALIGNMENT_PX = 16
 # The keypoints joints.trc always holds (estimated ones included), then any other of the model's.
 OUTPUT_KEYPOINTS = ["Hip", "Neck", "Head", "LShoulder", "LElbow", "LWrist", "RShoulder", "RElbow",
                     "RWrist", "LHip", "LKnee", "LAnkle", "RHip", "RKnee", "RAnkle"]
@@ -109,32 +103,6 @@ class TrackJob:
         return [self.targets, self.static, self.calibration, self.masks, self.videos, self.background, self.model]
 
 
-@dataclass
-class Silhouettes:
-    """Per camera, either mask files (read lazily) or decoded video silhouettes."""
-
-    mask_files: list[list[Path]] | None
-    video_masks: list[list[np.ndarray]] | None
-    sizes: list[tuple[int, int]]
-
-    @property
-    def frame_count(self) -> int:
-        source = self.mask_files if self.mask_files is not None else self.video_masks
-        return len(source[0]) if source else 0
-
-    def mask(self, index: int, camera: int) -> np.ndarray:
-        """Frame `index`'s (H, W) bool silhouette in camera number `camera`."""
-        if self.mask_files is not None:
-            return read_mask(self.mask_files[camera][index], self.sizes[camera])
-        if self.video_masks is None:
-            raise InputError("silhouettes: neither mask files nor video masks were loaded")
-        return self.video_masks[camera][index]
-
-    def frame(self, index: int) -> list[np.ndarray]:
-        """Frame `index`'s silhouettes, one per camera."""
-        return [self.mask(index, camera) for camera in range(len(self.sizes))]
-
-
 def _trc_in_metres(path: Path) -> tuple[TrcData, np.ndarray]:
     data = read_trc(path)
     if data.units not in METRES_PER_UNIT:
@@ -149,91 +117,6 @@ def _check_names(path: Path, names: Sequence[str], body: BodyModel) -> None:
             f"{path}: unknown keypoint name(s) {', '.join(unknown)}; known keypoints: "
             + ", ".join(body.keypoints)
         )
-
-
-def _plain(name: str) -> str:
-    """A name for matching files to cameras: lower case, without separators ("cam_01" ~ "Cam01")."""
-    return "".join(character for character in name.lower() if character.isalnum())
-
-
-def _camera_folder_entries(folder: Path, names: list[str], kind: str) -> dict[str, Path]:
-    """Per camera, its mask sub-folder (--masks) or its video (--videos) in `folder`.
-
-    A sub-folder is named after the camera; a video's file name starts with the camera name. Case
-    and separators are ignored, so Pose2Sim's cam01.mp4 serves the calibration's cam_01.
-    """
-    if not folder.is_dir():
-        raise FileFormatError(f"--{kind} {folder}: not a folder")
-    if kind == "masks":
-        candidates = [p for p in sorted(folder.iterdir()) if p.is_dir()]
-        matches = {name: [p for p in candidates if _plain(p.name) == _plain(name)] for name in names}
-        what = "sub-folder named"
-    else:
-        candidates = [p for p in sorted(folder.iterdir()) if p.suffix.lower() in VIDEO_SUFFIXES]
-        matches = {name: [p for p in candidates if _plain(p.stem).startswith(_plain(name))] for name in names}
-        what = "video whose file name starts with"
-    missing = [name for name, found in matches.items() if not found]
-    if missing:
-        raise FileFormatError(f"--{kind} {folder}: no {what} {missing[0]!r} (the calibration's "
-                              f"cameras: {', '.join(names)})")
-    return {name: found[0] for name, found in matches.items()}
-
-
-def load_silhouettes(job: TrackJob, cameras: list, frame_count: int, progress: bool) -> Silhouettes:
-    """Mask files or video silhouettes for every camera, checked against the targets' frame count."""
-    names = [camera.name for camera in cameras]
-    sizes = [tuple(camera.size) for camera in cameras]
-    if job.masks is not None:
-        folders = _camera_folder_entries(job.masks, names, "masks")
-        files = [list_mask_files(folders[name]) for name in names]
-        for name, listed, size in zip(names, files, sizes, strict=True):
-            if len(listed) != frame_count:
-                raise InputError(f"--masks {folders[name]}: {len(listed)} masks for camera {name!r} "
-                                 f"but the targets have {frame_count} frames")
-            read_mask(listed[0], size)  # size and readability, before any solving
-        return Silhouettes(files, None, sizes)
-    if job.videos is None:
-        raise InputError("the image criterion needs --masks or --videos (or pass --no-image)")
-    videos = _camera_folder_entries(job.videos, names, "videos")
-    backgrounds: dict[str, list[Path]] = {name: [] for name in names}
-    if job.background is not None:
-        if not job.background.is_dir():
-            raise FileFormatError(f"--background {job.background}: not a folder")
-        for path in sorted(job.background.iterdir()):
-            for name in names:
-                if (_plain(path.stem).startswith(_plain(name))
-                        and path.suffix.lower() in IMAGE_SUFFIXES | VIDEO_SUFFIXES):
-                    backgrounds[name].append(path)
-    masks = []
-    # disable=None draws the bar only when stderr is a terminal, so logs and pipes stay clean.
-    with tqdm(total=len(names), desc="silhouettes", unit="camera", disable=None if progress else True) as bar:
-        for name, size in zip(names, sizes, strict=True):
-            with VideoReader(videos[name]) as reader:
-                video_size = tuple(reader.size)
-            if any(abs(a - b) >= CODEC_ALIGNMENT_PX for a, b in zip(video_size, size, strict=True)):
-                raise InputError(f"--videos {videos[name]}: frames are {video_size[0]} x "
-                                 f"{video_size[1]} px but camera {name!r} is {size[0]} x {size[1]} px")
-            camera_masks = silhouettes_from_video(videos[name], backgrounds[name] or None)
-            if video_size != size:
-                warnings.warn(f"--videos {videos[name]}: frames are {video_size[0]} x {video_size[1]} px, "
-                              f"camera {name!r} {size[0]} x {size[1]} px: silhouettes padded or cropped "
-                              "at the right and bottom (encoder alignment)", IbikWarning, stacklevel=2)
-                camera_masks = [_fit_to_size(mask, size) for mask in camera_masks]
-            if len(camera_masks) != frame_count:
-                raise InputError(f"--videos {videos[name]}: {len(camera_masks)} frames but the targets "
-                                 f"have {frame_count} frames")
-            masks.append(camera_masks)
-            bar.update()
-    return Silhouettes(None, masks, sizes)
-
-
-def _fit_to_size(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """The mask or image padded with zeros or cropped at the right and bottom to (width, height)."""
-    width, height = size
-    fitted = np.zeros((height, width) + image.shape[2:], dtype=image.dtype)
-    rows, columns = min(height, image.shape[0]), min(width, image.shape[1])
-    fitted[:rows, :columns] = image[:rows, :columns]
-    return fitted
 
 
 def prepare_body(job: TrackJob, names: list[str], targets_m: np.ndarray) -> BodyModel:
@@ -389,8 +272,8 @@ def write_overlays(folder: Path, job: TrackJob, body: BodyModel, cameras: list,
     for index, camera in enumerate(cameras):
         skeletons = ((camera.project(starts[f]), camera.project(ends[f])) for f in range(len(times)))
         if job.videos is not None:
-            reader = VideoReader(_camera_folder_entries(job.videos, [camera.name], "videos")[camera.name])
-            frames = (_fit_to_size(frame, tuple(camera.size)) for frame in reader)
+            reader = VideoReader(camera_folder_entries(job.videos, [camera.name], "videos")[camera.name])
+            frames = (fit_to_size(frame, tuple(camera.size)) for frame in reader)
         else:
             reader = None
             width, height = camera.size
