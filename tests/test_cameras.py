@@ -201,7 +201,7 @@ def test_read_calibration_reports_unparsable_toml_and_missing_files(tmp_path):
     path = write_text(tmp_path / "broken.toml", "[cam_01\nname = ")
     with pytest.raises(FileFormatError, match=r"broken\.toml': expected valid TOML"):
         read_calibration(path)
-    with pytest.raises(FileFormatError, match=r"absent\.toml': cannot be read"):
+    with pytest.raises(FileFormatError, match=r"absent\.toml: cannot read this calibration file"):
         read_calibration(tmp_path / "absent.toml")
 
 

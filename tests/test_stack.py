@@ -109,7 +109,7 @@ def test_a_bad_stack_file_is_refused_naming_the_file_level_and_key(tmp_path, cas
 
 
 def test_a_missing_stack_file_is_refused():
-    with pytest.raises(StackError, match=r"stack file 'nowhere\.toml': cannot be read"):
+    with pytest.raises(StackError, match=r"nowhere\.toml: cannot read this stack file"):
         Stack.from_toml("nowhere.toml")
 
 

@@ -70,12 +70,10 @@ def test_ibik_with_two_views_cuts_pik_boxing_elbow_error_by_40_percent_and_stays
 def test_the_image_does_not_pull_the_targets_off(kind, results):
     """Every target keypoint stays, on average, within 3 mm of where the blind solve puts it: the
     image moves the limbs, not the trunk (with the trunk free, the boxing Neck ended 57 mm off
-    against 20 mm without the image, on the 2-s window this excerpt comes from). The toes are
-    allowed 10 mm: a rigid two-axis foot cannot meet the data's toe, and the hip's axial rotation
-    that turns the foot is also the knee's swivel, which the image sets (walking: 5-8 mm more)."""
+    against 20 mm without the image, on the 2-s window this excerpt comes from), and not the feet
+    (without the tracker's closing targets-only step, the walking toes ended 11 mm further off)."""
     pik, ibik = results[kind, "pik"].residuals_mm, results[kind, "ibik2v"].residuals_mm
-    allowed = {name: 10.0 if "Toe" in name or "Heel" in name else 3.0 for name in pik}
-    worse = {name: round(ibik[name] - pik[name], 1) for name in pik if ibik[name] > pik[name] + allowed[name]}
+    worse = {name: round(ibik[name] - pik[name], 1) for name in pik if ibik[name] > pik[name] + 3.0}
     assert worse == {}, f"residual increase over PIK [mm]: {worse}"
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 import shutil
 import sys
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -18,7 +19,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ibik_pin.configuration import Configuration
-from ibik_pin.exceptions import FileFormatError, InputError
+from ibik_pin.exceptions import FileFormatError, IbikWarning, InputError
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, read_calibration
 from ibik_pin.io.export import write_model_bvh, write_model_mot, write_q_csv
 from ibik_pin.io.osim import write_osim_model
@@ -32,6 +33,12 @@ from ibik_pin.subject.scaling import (
     segment_lengths_from_keypoints,
 )
 from ibik_pin.tracking.axes import AxesChoice, choose_axes
+from ibik_pin.tracking.input_checks import (
+    check_cameras_see_targets,
+    check_trc,
+    drop_outlier_targets,
+    silhouettes_all_empty,
+)
 from ibik_pin.tracking.outdir import check_outdir, make_staging, publish
 from ibik_pin.tracking.report import TrackingReport
 from ibik_pin.tracking.silhouette_files import Silhouettes, camera_folder_entries, fit_to_size, load_silhouettes
@@ -103,11 +110,16 @@ class TrackJob:
         return [self.targets, self.static, self.calibration, self.masks, self.videos, self.background, self.model]
 
 
-def _trc_in_metres(path: Path) -> tuple[TrcData, np.ndarray]:
+def _trc_in_metres(option: str, path: Path) -> tuple[TrcData, np.ndarray]:
+    """A TRC read and checked for plausibility (tracking.input_checks), its positions in metres."""
     data = read_trc(path)
     if data.units not in METRES_PER_UNIT:
         raise FileFormatError(f"{path}: units {data.units!r} are not one of m, cm, mm")
-    return data, data.positions * METRES_PER_UNIT[data.units]
+    positions_m = data.positions * METRES_PER_UNIT[data.units]
+    if option == "--targets":  # a static trial is a few still frames: no leap to drop
+        positions_m = drop_outlier_targets(option, data.marker_names, positions_m)
+    check_trc(option, path, data, positions_m)
+    return data, positions_m
 
 
 def _check_names(path: Path, names: Sequence[str], body: BodyModel) -> None:
@@ -133,7 +145,7 @@ def prepare_body(job: TrackJob, names: list[str], targets_m: np.ndarray) -> Body
     body = load_human(job.model) if job.model is not None else load_human()
     _check_names(job.targets, names, body)
     if job.static is not None:
-        static, static_m = _trc_in_metres(job.static)
+        static, static_m = _trc_in_metres("--static", job.static)
         _check_names(job.static, static.marker_names, body)
         return calibrate_subject(body, static.marker_names, static_m, source=f"--static {job.static}").body
     if body.calibrated:
@@ -176,7 +188,7 @@ def run_track(job: TrackJob) -> TrackingReport:
 
 def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
     """Read, check, track and write every output into `staging`."""
-    trc, targets_trc_m = _trc_in_metres(job.targets)
+    trc, targets_trc_m = _trc_in_metres("--targets", job.targets)
     names = list(trc.marker_names)
     frame_count = targets_trc_m.shape[0]
     if frame_count == 0:
@@ -195,6 +207,11 @@ def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
         if job.masks is None and job.videos is None:
             raise InputError("the image criterion needs --masks or --videos (or pass --no-image)")
         silhouettes = load_silhouettes(job, cameras, frame_count, not job.quiet)
+        if silhouettes_all_empty(silhouettes.frame, frame_count):
+            warnings.warn(f"--{'masks' if job.masks is not None else 'videos'}: every silhouette is empty; "
+                          "tracking without the image (as --no-image)", IbikWarning, stacklevel=2)
+            use_image = False
+            job = replace(job, settings=replace(job.settings, use_image=False))
     elif job.overlay and cameras and (job.masks is not None or job.videos is not None):
         silhouettes = load_silhouettes(job, cameras, frame_count, not job.quiet)
     # The cameras project model-frame points whatever the TRC's convention: only the targets turn.
@@ -203,6 +220,8 @@ def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
     if not job.quiet:
         print(f"ibik: TRC axes: {axes.describe()}", file=sys.stderr)
     targets_m = axes.to_model(targets_trc_m)
+    if use_image:  # blind, the cameras only draw the overlays
+        check_cameras_see_targets(cameras, targets_m, axes.sampled_frames)
     body = prepare_body(job, names, targets_m)
 
     tracker = Tracker(body, cameras if use_image else [], job.settings)
