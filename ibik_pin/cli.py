@@ -21,6 +21,7 @@ if __name__ == "__main__" or Path(sys.argv[0]).stem == "ibik":
 import argparse
 import signal
 import threading
+import typing
 import warnings
 from typing import TYPE_CHECKING
 
@@ -37,16 +38,18 @@ if TYPE_CHECKING:
 
 
 def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--targets", type=Path, required=True,
+    # Paths stay text: TrackJob checks and converts them, and an empty one must reach it as such
+    # (Path("") is the current folder).
+    parser.add_argument("--targets", required=True,
                         help="OpenSim TRC of 3D keypoints (Pose2Sim names), m or mm")
-    parser.add_argument("--static", type=Path, help="TRC of a static trial, to scale the model")
-    parser.add_argument("--calibration", type=Path, help="Pose2Sim calibration TOML")
+    parser.add_argument("--static", help="TRC of a static trial, to scale the model")
+    parser.add_argument("--calibration", help="Pose2Sim calibration TOML")
     sources = parser.add_mutually_exclusive_group()
-    sources.add_argument("--masks", type=Path, help="folder with one sub-folder of masks per camera")
-    sources.add_argument("--videos", type=Path, help="folder with one video per camera")
-    parser.add_argument("--background", type=Path, help="frames of the empty scene (with --videos)")
+    sources.add_argument("--masks", help="folder with one sub-folder of masks per camera")
+    sources.add_argument("--videos", help="folder with one video per camera")
+    parser.add_argument("--background", help="frames of the empty scene (with --videos)")
     parser.add_argument("--cameras", help="comma-separated subset of the calibration's cameras")
-    parser.add_argument("--model", type=Path, help="URDF of the human (default: example-robot-data's)")
+    parser.add_argument("--model", help="URDF of the human (default: example-robot-data's)")
     parser.add_argument("--method", choices=sorted(SOLVERS), default="qp",
                         help="solver scheme (default: qp, the hierarchical QP with joint limits)")
     parser.add_argument("--no-image", action="store_true",
@@ -78,7 +81,7 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--overlay", action="store_true",
                         help="also write overlay videos, a residual plot and an HTML 3D replay")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
-    parser.add_argument("--out", type=Path, required=True, help="output folder")
+    parser.add_argument("--out", required=True, help="output folder")
 
 
 def _job(arguments: argparse.Namespace) -> TrackJob:
@@ -119,11 +122,11 @@ def _add_calibrate_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _calibrate(arguments: argparse.Namespace) -> None:
     """`ibik calibrate`: fit the subject on the static trial, write its URDF and figures, print them."""
-    import json
 
     from ibik_pin.exceptions import IbikWarning
     from ibik_pin.model import load_human
     from ibik_pin.subject.calibration import calibrate_static_trial, parse_frame_range
+    from ibik_pin.subject.calibration_result import write_calibration_figures
     from ibik_pin.subject.urdf import write_subject_urdf
 
     frame_range = parse_frame_range(arguments.frames) if arguments.frames else (None, None)
@@ -132,19 +135,24 @@ def _calibrate(arguments: argparse.Namespace) -> None:
     body = load_human(arguments.model) if arguments.model is not None else load_human()
     result = calibrate_static_trial(arguments.static, body, frame_range)
     notes = write_subject_urdf(result.body, arguments.out)
-    figures = arguments.out.with_name(arguments.out.stem + ".calibration.json")
-    figures.write_text(json.dumps({
-        "static": str(arguments.static), "model": str(body.urdf_path), "urdf": str(arguments.out),
-        **result.to_json(), "notes": notes}, indent=2) + "\n")
+    figures = write_calibration_figures(arguments.out, arguments.static, body.urdf_path, result, notes)
     for note in notes:
         warnings.warn(note, IbikWarning, stacklevel=1)
     print(result.table())
     print(f"wrote {arguments.out} and {figures}")
 
 
+class _OneLineParser(argparse.ArgumentParser):
+    """argparse with its errors in the package's form: one line on stderr, exit code 2."""
+
+    def error(self, message: str) -> typing.NoReturn:
+        self.exit(2, f"ibik: error: {' '.join(message.split())} (ibik {self.prog.partition(' ')[2] or ''}"
+                     f"{' ' if ' ' in self.prog else ''}--help lists the options)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="ibik", description="Image-constrained inverse kinematics "
-                                     "for markerless human motion capture")
+    parser = _OneLineParser(prog="ibik", description="Image-constrained inverse kinematics "
+                            "for markerless human motion capture")
     commands = parser.add_subparsers(dest="command", required=True)
     track = commands.add_parser("track", help="track a recorded sequence")
     _add_track_arguments(track)
@@ -178,6 +186,9 @@ def _raise_terminated(signal_number: int, frame: object) -> None:
 def main(argv: list[str] | None = None) -> int:
     arguments = build_parser().parse_args(argv)
     warnings.formatwarning = _one_line_warning
+    # numpy's "Mean of empty slice" and the like: the package checks its inputs and reports what a
+    # user can act on; numpy's own words about an intermediate array are noise on the one line.
+    warnings.filterwarnings("ignore", category=RuntimeWarning)
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, _raise_terminated)
     try:

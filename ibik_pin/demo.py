@@ -10,13 +10,13 @@ elbow and knee errors of both are compared with the truth.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
 from ibik_pin.evaluation import ESTIMATED, mean_joint_errors_mm
 from ibik_pin.io.asf_amc import read_asf_amc
+from ibik_pin.io.files import strict_json, write_text_atomically
 from ibik_pin.io.trc import TrcData, read_trc, write_trc
 from ibik_pin.model import load_human
 from ibik_pin.subject.scaling import scale_human, segment_lengths_from_keypoints
@@ -66,7 +66,7 @@ def run_demo(out: Path, quiet: bool = False) -> dict:
                                       truth.marker_names, ESTIMATED)
         comparison[variant] = {"joint_error_mm": errors, "mean_error_mm": float(np.mean(list(errors.values()))),
                                "solve_frames_per_second": report["solve_frames_per_second"]}
-    (out / "comparison.json").write_text(json.dumps(comparison, indent=2))
+    write_text_atomically(out / "comparison.json", strict_json(comparison))
     if not quiet:
         print("mean error against the truth [mm] (eq. 9 of the paper):")
         print("joint     " + "".join(f"{name:>9}" for name in ESTIMATED) + "     mean")

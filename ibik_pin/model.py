@@ -22,6 +22,7 @@ import pinocchio as pin
 from ibik_pin.exceptions import FileFormatError, InputError, UnknownNameError
 from ibik_pin.feet import add_foot_rotation
 from ibik_pin.io.files import checked_input_file
+from ibik_pin.io.native_output import NativeOutput, captured_native_stderr
 
 HUMAN_URDF_RELATIVE = Path("example-robot-data/robots/human_description/robots/human.urdf")
 #: Links of this prefix in a URDF are keypoints (``keypoint_Neck`` is the Neck), see load_human.
@@ -104,12 +105,21 @@ def load_urdf(path: str | Path, free_flyer: bool = False) -> pin.Model:
     path = Path(path)
     if not path.is_file():
         raise FileFormatError(f"URDF file {str(path)!r} does not exist")
-    try:
-        if free_flyer:
-            return pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
-        return pin.buildModelFromUrdf(str(path))
-    except (RuntimeError, ValueError) as error:
-        raise FileFormatError(f"URDF file {str(path)!r} cannot be parsed: {error}") from error
+    with captured_native_stderr() as parser:  # urdfdom's reasons, quoted in the error
+        try:
+            if free_flyer:
+                return pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
+            return pin.buildModelFromUrdf(str(path))
+        except (RuntimeError, ValueError) as error:
+            failure = error
+    raise FileFormatError(f"URDF file {str(path)!r} cannot be parsed: {_urdf_reason(failure, parser)}") from failure
+
+
+def _urdf_reason(error: Exception, parser: NativeOutput) -> str:
+    """Pinocchio's error, with urdfdom's first line ("Error: Joint [j] is of type REVOLUTE but it
+    does not specify limits"), which says what is wrong, when it printed one."""
+    said = parser.first_line().removeprefix("Error:").strip()
+    return f"{error} ({said})" if said else str(error)
 
 
 def human_urdf_path() -> Path:
@@ -137,7 +147,10 @@ def human_urdf_tree(path: str | Path) -> ElementTree.ElementTree[ElementTree.Ele
         tree = ElementTree.parse(path)
     except (OSError, ElementTree.ParseError) as error:
         raise FileFormatError(f"URDF {str(path)!r} cannot be read: {error}") from error
-    add_foot_rotation(tree.getroot())
+    try:
+        add_foot_rotation(tree.getroot())
+    except FileFormatError as error:
+        raise FileFormatError(f"URDF file {str(path)!r}: {error}") from error
     return tree
 
 
@@ -222,11 +235,17 @@ def load_human(urdf_path: str | Path | None = None, free_flyer: bool = True) -> 
     """
     path = Path(urdf_path) if urdf_path is not None else human_urdf_path()
     xml = ElementTree.tostring(human_urdf_tree(path).getroot(), encoding="unicode")
-    try:
-        model = (pin.buildModelFromXML(xml, pin.JointModelFreeFlyer()) if free_flyer
-                 else pin.buildModelFromXML(xml))
-    except (RuntimeError, ValueError) as error:
-        raise FileFormatError(f"URDF file {str(path)!r} cannot be parsed: {error}") from error
+    with captured_native_stderr() as parser:
+        try:
+            model = (pin.buildModelFromXML(xml, pin.JointModelFreeFlyer()) if free_flyer
+                     else pin.buildModelFromXML(xml))
+        except (RuntimeError, ValueError) as error:
+            failure: Exception | None = error
+        else:
+            failure = None
+    if failure is not None:
+        raise FileFormatError(f"URDF file {str(path)!r} cannot be parsed: {_urdf_reason(failure, parser)}") \
+            from failure
     model.name = "human"
     # name -> (link frame index, parent joint, placement), copied: addFrame reallocates the frames
     calibrated = {frame.name[len(KEYPOINT_LINK_PREFIX):]: (index, int(frame.parentJoint), frame.placement.copy())

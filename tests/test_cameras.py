@@ -218,5 +218,6 @@ def test_select_cameras_returns_the_requested_cameras_in_the_given_order():
 
 def test_select_cameras_lists_the_available_names_for_an_unknown_one():
     cameras = [tiny_camera(name) for name in "ab"]
-    with pytest.raises(UnknownNameError, match=r"unknown camera name\(s\) \['z'\]; available cameras: \['a', 'b'\]"):
+    expected = r"--cameras: unknown camera name\(s\) \['z'\]; the calibration has \['a', 'b'\]"
+    with pytest.raises(UnknownNameError, match=expected):
         select_cameras(cameras, ["a", "z"])

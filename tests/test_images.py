@@ -206,9 +206,9 @@ def test_read_mask_names_the_file_and_both_sizes_on_a_size_mismatch(tmp_path):
 
 def test_read_mask_reports_an_unreadable_or_missing_image(tmp_path):
     (tmp_path / "fake.png").write_text("not an image")
-    with pytest.raises(FileFormatError, match=r"fake\.png': expected a readable image, found OpenCV cannot decode"):
+    with pytest.raises(FileFormatError, match=r"fake\.png': expected a readable image, OpenCV cannot decode it"):
         read_mask(tmp_path / "fake.png")
-    with pytest.raises(FileFormatError, match=r"absent\.png': expected a readable image, found file not found"):
+    with pytest.raises(FileFormatError, match=r"absent\.png': expected a readable image, found no such file"):
         read_mask(tmp_path / "absent.png")
 
 

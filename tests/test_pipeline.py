@@ -119,7 +119,13 @@ def test_auto_detection_without_silhouettes_falls_back_on_the_upright_body(recor
 
 def test_a_trc_that_fits_no_camera_is_refused_in_one_line(recording, tmp_path, capsys):
     _, _, far = recording
+    # With the image, the first camera that sees none of the targets under any convention is named.
     assert main(arguments(recording, far, tmp_path / "out")) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1
+    assert error.startswith("ibik: error: --calibration: camera 'cam1' sees none of the targets inside its ")
+    # Blind, the cameras serve only to tell the TRC's axes, and the axes' evidence is the message.
+    assert main(arguments(recording, far, tmp_path / "out", image=False)) == 2
     error = capsys.readouterr().err
     assert error.count("\n") == 1
     assert error.startswith("ibik: error: no axis convention puts the targets inside the cameras' images: ")

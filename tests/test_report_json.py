@@ -117,7 +117,7 @@ def test_report_json_names_the_unit_of_every_figure_and_a_0_1_overlap(report):
     figures = [key for key, value in written.items()
                if key not in ("units", "trc_axes", "solver_levels") and not isinstance(value, (str, bool))
                and key not in ("cameras", "frames", "joint_limit_hits", "frames_with_dropped_targets",
-                               "frames_with_disabled_views")]
+                               "frames_with_disabled_views", "frames_with_outlier_targets")]
     assert sorted(key for key in figures if key not in written["units"]) == []
     assert "px" in written["units"]["overlap_per_view"] and "not a 0-1 overlap" in written["units"]["overlap_per_view"]
     assert written["inside_fraction_per_view"] == {"cam1": [1.0, 0.75, None]}

@@ -86,7 +86,7 @@ def run_batch_command(arguments: argparse.Namespace, make_job: Callable[[argpars
     if not trials:
         raise InputError(f"ROOT {arguments.root}: no trial found (a folder holding a TRC matching "
                          f"{arguments.targets!r}, itself or in pose-3d/)")
-    model = arguments.model.resolve() if arguments.model is not None else None
+    model = Path(arguments.model).resolve() if arguments.model is not None else None
 
     outcomes: list[TrialOutcome] = []
     tasks = []

@@ -14,6 +14,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ibik_pin.batch.summary import TrialOutcome, outcome_from_report
+from ibik_pin.subject.calibration_result import write_calibration_figures
 from ibik_pin.tracking.pipeline import TrackJob, run_track
 
 __all__ = ["OUTPUT_FILES", "SubjectOutcome", "calibrate_subject_once", "completed_outcome", "one_line", "run_trial",
@@ -70,9 +71,7 @@ def calibrate_subject_once(static: Path, model: Path | None, urdf: Path) -> Subj
             result = calibrate_static_trial(static, body)
         staging = urdf.with_name(f".{urdf.name}.partial")
         notes = write_subject_urdf(result.body, staging)
-        urdf.with_name(urdf.stem + ".calibration.json").write_text(json.dumps({
-            "static": str(static), "model": str(body.urdf_path), "urdf": str(urdf),
-            **result.to_json(), "notes": notes}, indent=2) + "\n")
+        write_calibration_figures(urdf, static, body.urdf_path, result, notes)
         staging.replace(urdf)
     except Exception as error:  # any failure is this participant's, recorded for each of its trials
         return SubjectOutcome(urdf, f"subject calibration on {static} failed: {one_line(error)}")

@@ -8,13 +8,17 @@ failure never leaves a half-written file.
 
 from __future__ import annotations
 
+import json
+import math
 import os
 import stat
 import uuid
 import warnings
 from collections.abc import Callable
 from pathlib import Path
-from typing import TypeVar
+from typing import Any, TypeVar
+
+import numpy as np
 
 from ibik_pin.exceptions import (
     FileFormatError,
@@ -26,6 +30,8 @@ __all__ = [
     "PathLike",
     "check_declared_count",
     "is_number",
+    "json_ready",
+    "strict_json",
     "MAX_INPUT_BYTES",
     "checked_input_file",
     "read_text",
@@ -60,8 +66,8 @@ def checked_input_file(path: str | os.PathLike[str], what: str) -> Path:
         kind = "a folder" if stat.S_ISDIR(status.st_mode) else "not a regular file (a pipe, socket or device)"
         raise FileFormatError(f"{path}: expected a {what} file, found {kind}")
     if status.st_size > MAX_INPUT_BYTES:
-        raise FileFormatError(f"{path}: {status.st_size / 2**20:.0f} MiB is over the {MAX_INPUT_BYTES >> 20} MiB "
-                              f"limit of an input file; is it really a {what} file?")
+        raise FileFormatError(f"{path}: {status.st_size:,} bytes, larger than the {MAX_INPUT_BYTES:,}-byte "
+                              f"(1 GiB) limit of an input file; is it really a {what} file?")
     return path
 
 
@@ -136,3 +142,30 @@ def write_text_atomically(path: str | os.PathLike[str], text: str) -> None:
             stream.write(text)
 
     write_atomically(path, write)
+
+
+def json_ready(value: Any) -> Any:
+    """Plain JSON values: numpy numbers and arrays converted, paths as text, NaN and infinities as
+    None (JSON has no token for them; a bare NaN makes the file unreadable to strict parsers)."""
+    if isinstance(value, dict):
+        return {str(key): json_ready(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_ready(item) for item in value]
+    if isinstance(value, np.ndarray):
+        return json_ready(value.tolist())
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    return value
+
+
+def strict_json(value: Any, indent: int | None = 2) -> str:
+    """`value` as strict JSON text (json_ready first), ending with a newline when indented."""
+    text = json.dumps(json_ready(value), indent=indent, allow_nan=False,
+                      separators=None if indent is not None else (",", ":"))
+    return text + "\n" if indent is not None else text

@@ -15,11 +15,30 @@ import numpy as np
 
 from ibik_pin.exceptions import FileFormatError, InputError
 from ibik_pin.io.files import PathLike
+from ibik_pin.io.native_output import captured_native_stderr
 
-__all__ = ["IMAGE_SUFFIXES", "list_mask_files", "read_mask"]
+__all__ = ["IMAGE_SUFFIXES", "list_mask_files", "read_image", "read_mask"]
 
 #: The file suffixes read as images (any case).
 IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"})
+
+
+def read_image(path: Path, flags: int, what: str) -> np.ndarray:
+    """An image file decoded by OpenCV, what its decoder prints to stderr quoted in the error.
+
+    Raises:
+        FileFormatError: naming `what` ("mask", "background"), when the file is missing or cannot be
+            decoded.
+    """
+    if not path.is_file():
+        raise FileFormatError(f"{what} file '{path}': expected a readable image, found "
+                              + ("no such file" if not path.exists() else "not a regular file"))
+    with captured_native_stderr() as decoder:
+        image = cv2.imread(str(path), flags)
+    if image is None:
+        said = f" ({decoder.first_line()})" if decoder.first_line() else ""
+        raise FileFormatError(f"{what} file '{path}': expected a readable image, OpenCV cannot decode it{said}")
+    return image
 
 
 def read_mask(path: PathLike, expected_size: tuple[int, int] | None = None) -> np.ndarray:
@@ -40,10 +59,7 @@ def read_mask(path: PathLike, expected_size: tuple[int, int] | None = None) -> n
         InputError: the size differs from ``expected_size``.
     """
     path = Path(path)
-    image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE) if path.is_file() else None
-    if image is None:
-        reason = "file not found" if not path.exists() else "OpenCV cannot decode it as an image"
-        raise FileFormatError(f"mask file '{path}': expected a readable image, found {reason}")
+    image = read_image(path, cv2.IMREAD_GRAYSCALE, "mask")
     found = (image.shape[1], image.shape[0])
     if expected_size is not None and tuple(int(s) for s in expected_size) != found:
         raise InputError(

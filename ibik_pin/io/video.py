@@ -12,6 +12,7 @@ import numpy as np
 
 from ibik_pin.exceptions import FileFormatError, InputError
 from ibik_pin.io.files import PathLike
+from ibik_pin.io.native_output import captured_native_stderr
 
 __all__ = ["VideoReader", "read_frames"]
 
@@ -46,13 +47,15 @@ class VideoReader:
             raise FileFormatError(f"video file '{self.path}': expected a video stream, found frame size {self.size}")
 
     def _open(self) -> cv2.VideoCapture:
-        try:
-            capture = cv2.VideoCapture(str(self.path))
-        except cv2.error as error:  # pragma: no cover - depends on the OpenCV build
-            raise FileFormatError(f"video file '{self.path}': OpenCV cannot open it ({error})") from None
+        with captured_native_stderr() as decoder:  # FFmpeg's complaints, quoted below
+            try:
+                capture = cv2.VideoCapture(str(self.path))
+            except cv2.error as error:  # pragma: no cover - depends on the OpenCV build
+                raise FileFormatError(f"video file '{self.path}': OpenCV cannot open it ({error})") from None
         if not capture.isOpened():
             capture.release()
-            raise FileFormatError(f"video file '{self.path}': expected a video OpenCV can decode, found none")
+            said = f" ({decoder.first_line()})" if decoder.first_line() else ""
+            raise FileFormatError(f"video file '{self.path}': expected a video OpenCV can decode, found none{said}")
         return capture
 
     def __iter__(self) -> Iterator[np.ndarray]:

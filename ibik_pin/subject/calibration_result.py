@@ -8,12 +8,14 @@ its :meth:`~CalibrationResult.table` is what `ibik calibrate` prints and its
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 
+from ibik_pin.io.files import strict_json, write_text_atomically
 from ibik_pin.model import BodyModel
 
-__all__ = ["CalibrationResult"]
+__all__ = ["CalibrationResult", "write_calibration_figures"]
 
 
 @dataclasses.dataclass
@@ -79,6 +81,16 @@ class CalibrationResult:
         mean_before, mean_after = 1000 * self.residual_before[:, 0].mean(), 1000 * self.residual_after[:, 0].mean()
         lines.append(f"{'mean':<10} {mean_before:11.1f} {'':>7} {mean_after:11.1f}")
         return "\n".join(lines)
+
+
+def write_calibration_figures(urdf: Path, static: Path, model: Path | None, result: CalibrationResult,
+                              notes: list[str]) -> Path:
+    """Write the calibration's figures beside the subject's URDF, as ``<stem>.calibration.json``
+    (strict JSON, written atomically); returns that path."""
+    path = urdf.with_name(urdf.stem + ".calibration.json")
+    write_text_atomically(path, strict_json({"static": static, "model": model, "urdf": urdf,
+                                             **result.to_json(), "notes": notes}))
+    return path
 
 
 def _mm(value: float) -> float:

@@ -9,7 +9,6 @@ Z-up world (:data:`~ibik_pin.io.calibration.POSE2SIM_TRC_TO_WORLD`), the keypoin
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -19,6 +18,7 @@ import numpy as np
 
 from ibik_pin.exceptions import InputError, UnknownNameError
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, write_calibration
+from ibik_pin.io.files import strict_json
 from ibik_pin.io.trc import TrcData, write_trc
 from ibik_pin.model import BodyModel
 from ibik_pin.synthetic.defects import SilhouetteDefects, apply_defects
@@ -164,7 +164,7 @@ def write_dataset(
         "model": model.name,
         "nq": model.nq,
     }
-    paths.metadata.write_text(json.dumps(metadata, indent=2) + "\n")
+    paths.metadata.write_text(strict_json(metadata))
     return paths
 
 

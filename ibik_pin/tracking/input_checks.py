@@ -67,9 +67,10 @@ def body_span_m(positions_m: np.ndarray) -> float:
     return float(np.median(spans)) if spans else float("nan")
 
 
-def drop_outlier_targets(option: str, names: Sequence[str], targets_m: np.ndarray) -> np.ndarray:
+def drop_outlier_targets(option: str, names: Sequence[str], targets_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The targets with every value farther than OUTLIER_DISTANCE_M from its frame's median set to
-    NaN (dropped for that frame, as an occluded target is), and one warning that counts them."""
+    NaN (dropped for that frame, as an occluded target is), and (F, T) bool: which were dropped.
+    One warning counts them and names the first few."""
     cleaned = targets_m.copy()
     median = np.nanmedian(np.where(np.isfinite(targets_m), targets_m, np.nan), axis=1, keepdims=True) \
         if np.isfinite(targets_m).any() else targets_m
@@ -83,26 +84,40 @@ def drop_outlier_targets(option: str, names: Sequence[str], targets_m: np.ndarra
         more = f" and {far.sum() - 5} more" if far.sum() > 5 else ""
         warnings.warn(f"{option}: {int(far.sum())} target value(s) lie more than {OUTLIER_DISTANCE_M} m from the "
                       f"rest of the body and are dropped for their frame: {listed}{more}", IbikWarning, stacklevel=2)
-    return cleaned
+    return cleaned, far
 
 
-def check_cameras_see_targets(cameras: Sequence, targets_m: np.ndarray, frames: Sequence[int]) -> None:
+def check_cameras_see_targets(cameras: Sequence, targets_trc_m: np.ndarray, frames: Sequence[int],
+                              trc_to_model: Sequence[np.ndarray]) -> None:
     """Refuse a calibration where a camera sees no target in front of it and inside its image over
-    the sampled frames (InputError naming the camera; the targets in the model frame)."""
-    points = targets_m[list(frames)].reshape(-1, 3)
-    points = points[np.isfinite(points).all(axis=1)]
-    if not len(points):
+    the sampled frames, under every axis convention still in question (InputError naming the
+    camera): a camera that fails under all of them is wrong whatever the TRC's axes.
+
+    Args:
+        cameras: cameras that project model-frame points.
+        targets_trc_m: (F, K, 3) targets as the TRC holds them [m].
+        frames: the frames to look at.
+        trc_to_model: one (3, 3) rotation per convention in question (tracking.axes.TRC_TO_MODEL).
+    """
+    points_trc = targets_trc_m[list(frames)].reshape(-1, 3)
+    points_trc = points_trc[np.isfinite(points_trc).all(axis=1)]
+    if not len(points_trc):
         return
     for camera in cameras:
-        projection = camera.project_with_jacobian(points)
         width, height = camera.size
-        pixels = projection.pixels
-        in_front = projection.depth > 0
-        inside = in_front & (pixels[:, 0] >= 0) & (pixels[:, 0] < width) & (pixels[:, 1] >= 0) & (pixels[:, 1] < height)
-        if not in_front.any():
+        in_front = inside = False
+        for rotation in trc_to_model:
+            projection = camera.project_with_jacobian(points_trc @ np.asarray(rotation).T)
+            front = projection.depth > 0
+            with np.errstate(invalid="ignore", over="ignore"):
+                u, v = projection.pixels[:, 0], projection.pixels[:, 1]
+                seen = front & (u >= 0) & (u < width) & (v >= 0) & (v < height)
+            in_front |= bool(front.any())
+            inside |= bool(seen.any())
+        if not in_front:
             raise InputError(f"--calibration: camera {camera.name!r} has every target behind it; check its "
                              "rotation and translation (and that --targets is the same recording)")
-        if not inside.any():
+        if not inside:
             raise InputError(f"--calibration: camera {camera.name!r} sees none of the targets inside its "
                              f"{width} x {height} px image; check its intrinsics, distortion and pose")
 

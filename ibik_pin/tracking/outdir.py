@@ -8,6 +8,7 @@ holds or lies inside one of the inputs.
 
 from __future__ import annotations
 
+import errno
 import os
 import shutil
 import tempfile
@@ -88,17 +89,29 @@ def make_staging(out: Path) -> Path:
     return staging
 
 
-def publish(staging: Path, out: Path) -> None:
+def publish(staging: Path, out: Path, attempts: int = 20) -> None:
     """Move the finished staging folder to OUTDIR. An earlier OUTDIR (checked by check_outdir) is
-    moved aside under a name of its own first, so that two runs never collide, then removed."""
-    if not out.exists():
-        os.replace(staging, out)
+    moved aside under a name of its own first, then removed. When another run publishes into the
+    same OUTDIR in between, the move is tried again: the last run to finish wins, and neither fails
+    nor leaves a backup behind."""
+    for _ in range(attempts):
+        previous = None
+        if out.exists():
+            previous = out.with_name(f".{out.name}.previous.{uuid.uuid4().hex[:12]}")
+            try:
+                os.replace(out, previous)
+            except FileNotFoundError:  # another run moved it aside first
+                continue
+        try:
+            os.replace(staging, out)
+        except OSError as error:
+            if error.errno not in (errno.ENOTEMPTY, errno.EEXIST):  # not another run's output in the way
+                if previous is not None and not out.exists():
+                    os.replace(previous, out)  # put the earlier output back
+                raise
+            continue
+        finally:
+            if previous is not None and previous.exists():
+                shutil.rmtree(previous, ignore_errors=True)
         return
-    previous = out.with_name(f".{out.name}.previous.{uuid.uuid4().hex[:12]}")
-    os.replace(out, previous)
-    try:
-        os.replace(staging, out)
-    except OSError:
-        os.replace(previous, out)  # put the earlier output back
-        raise
-    shutil.rmtree(previous, ignore_errors=True)
+    raise OutputFolderError(f"--out {out}: other runs kept replacing it; the outputs are left in {staging}")

@@ -32,7 +32,7 @@ from ibik_pin.subject.scaling import (
     scale_human,
     segment_lengths_from_keypoints,
 )
-from ibik_pin.tracking.axes import AxesChoice, choose_axes
+from ibik_pin.tracking.axes import TRC_AXES, TRC_TO_MODEL, AxesChoice, choose_axes, sample_frames
 from ibik_pin.tracking.input_checks import (
     check_cameras_see_targets,
     check_trc,
@@ -93,6 +93,8 @@ class TrackJob:
         for name in ("targets", "out", "static", "calibration", "masks", "videos", "background", "model"):
             value = getattr(self, name)
             if value is not None and not isinstance(value, Path):
+                if isinstance(value, str) and not value.strip():
+                    raise InputError(f"--{name} {value!r}: expected a path, found an empty name")
                 if not isinstance(value, (str, os.PathLike)):
                     raise InputError(f"TrackJob.{name}: expected a path (str or Path), found {type(value).__name__}")
                 setattr(self, name, Path(value))
@@ -110,16 +112,19 @@ class TrackJob:
         return [self.targets, self.static, self.calibration, self.masks, self.videos, self.background, self.model]
 
 
-def _trc_in_metres(option: str, path: Path) -> tuple[TrcData, np.ndarray]:
-    """A TRC read and checked for plausibility (tracking.input_checks), its positions in metres."""
+def _trc_in_metres(option: str, path: Path) -> tuple[TrcData, np.ndarray, np.ndarray]:
+    """A TRC read and checked for plausibility (tracking.input_checks): the data, its positions in
+    metres and (F, T) bool, the values dropped as outliers (only for --targets: a static trial is a
+    few still frames, with no leap to drop)."""
     data = read_trc(path)
     if data.units not in METRES_PER_UNIT:
         raise FileFormatError(f"{path}: units {data.units!r} are not one of m, cm, mm")
     positions_m = data.positions * METRES_PER_UNIT[data.units]
-    if option == "--targets":  # a static trial is a few still frames: no leap to drop
-        positions_m = drop_outlier_targets(option, data.marker_names, positions_m)
-    check_trc(option, path, data, positions_m)
-    return data, positions_m
+    check_trc(option, path, data, positions_m)  # first: in the wrong unit, every target is an outlier
+    outliers = np.zeros(positions_m.shape[:2], dtype=bool)
+    if option == "--targets":
+        positions_m, outliers = drop_outlier_targets(option, data.marker_names, positions_m)
+    return data, positions_m, outliers
 
 
 def _check_names(path: Path, names: Sequence[str], body: BodyModel) -> None:
@@ -145,7 +150,7 @@ def prepare_body(job: TrackJob, names: list[str], targets_m: np.ndarray) -> Body
     body = load_human(job.model) if job.model is not None else load_human()
     _check_names(job.targets, names, body)
     if job.static is not None:
-        static, static_m = _trc_in_metres("--static", job.static)
+        static, static_m, _ = _trc_in_metres("--static", job.static)
         _check_names(job.static, static.marker_names, body)
         return calibrate_subject(body, static.marker_names, static_m, source=f"--static {job.static}").body
     if body.calibrated:
@@ -188,7 +193,7 @@ def run_track(job: TrackJob) -> TrackingReport:
 
 def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
     """Read, check, track and write every output into `staging`."""
-    trc, targets_trc_m = _trc_in_metres("--targets", job.targets)
+    trc, targets_trc_m, outliers = _trc_in_metres("--targets", job.targets)
     names = list(trc.marker_names)
     frame_count = targets_trc_m.shape[0]
     if frame_count == 0:
@@ -206,6 +211,9 @@ def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
                              "(or pass --no-image for the blind baseline)")
         if job.masks is None and job.videos is None:
             raise InputError("the image criterion needs --masks or --videos (or pass --no-image)")
+        conventions = TRC_AXES if job.trc_axes == "auto" else (job.trc_axes,)
+        check_cameras_see_targets(cameras, targets_trc_m, sample_frames(targets_trc_m),
+                                  [TRC_TO_MODEL[axes] for axes in conventions])
         silhouettes = load_silhouettes(job, cameras, frame_count, not job.quiet)
         if silhouettes_all_empty(silhouettes.frame, frame_count):
             warnings.warn(f"--{'masks' if job.masks is not None else 'videos'}: every silhouette is empty; "
@@ -220,8 +228,6 @@ def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
     if not job.quiet:
         print(f"ibik: TRC axes: {axes.describe()}", file=sys.stderr)
     targets_m = axes.to_model(targets_trc_m)
-    if use_image:  # blind, the cameras only draw the overlays
-        check_cameras_see_targets(cameras, targets_m, axes.sampled_frames)
     body = prepare_body(job, names, targets_m)
 
     tracker = Tracker(body, cameras if use_image else [], job.settings)
@@ -230,13 +236,15 @@ def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
         result = tracker.track(names, targets_m, silhouettes.frame if use_image and silhouettes is not None else None,
                                progress=bar.update)
 
-    return write_outputs(staging, job, trc, body, cameras, silhouettes, result, axes)
+    return write_outputs(staging, job, trc, body, cameras, silhouettes, result, axes, outliers)
 
 
 def write_outputs(folder: Path, job: TrackJob, trc: TrcData, body: BodyModel, cameras: list,
-                  silhouettes: Silhouettes | None, result: TrackingResult, axes: AxesChoice) -> TrackingReport:
+                  silhouettes: Silhouettes | None, result: TrackingResult, axes: AxesChoice,
+                  outliers: np.ndarray | None = None) -> TrackingReport:
     """joints.trc (in the TRC's own axis convention), q.csv, motion.mot, motion.bvh, model.osim
-    (model frame, Y up), report.json (and the overlays) into `folder`.
+    (model frame, Y up), report.json (and the overlays) into `folder`. `outliers`: (F, T) bool,
+    the target values dropped as outliers, listed in report.json.
 
     Without a Hip target, the written Hip is HALPE_26's (Pose2Sim's): the midpoint of the hip
     joints, not the model's root above it (model.with_hip_at_hip_joints_midpoint)."""
@@ -260,7 +268,7 @@ def write_outputs(folder: Path, job: TrackJob, trc: TrcData, body: BodyModel, ca
     write_osim_model(folder / "model.osim", body, name=f"ibik_pin_{job.targets.stem}")
     report = TrackingReport.from_tracking(
         result, job.settings, result.camera_names,
-        trc.frame_numbers, times, frame_rate, axes,
+        trc.frame_numbers, times, frame_rate, axes, outliers,
     )
     report.write(folder / "report.json")
     if job.overlay:

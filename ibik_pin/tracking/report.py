@@ -10,7 +10,6 @@ frame, a disabled view) are written as JSON null, never as a bare NaN.
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from ibik_pin.io.files import write_text_atomically
+from ibik_pin.io.files import json_ready, strict_json, write_text_atomically
 from ibik_pin.tracking.axes import AXES_DESCRIPTIONS, AxesChoice
 from ibik_pin.tracking.tracker import TrackingResult, TrackingSettings
 
@@ -215,7 +214,10 @@ class TrackingReport:
         overlap_per_view: per camera, the image criterion at each frame's solution [px] (None when
             the view was disabled): a mean capped signed distance, see :data:`UNITS`.
         joint_limit_hits: TRC frame number -> joints at a limit (frames without any omitted).
-        frames_with_dropped_targets: TRC frame number -> targets absent in that frame.
+        frames_with_dropped_targets: TRC frame number -> targets absent in that frame (outliers
+            included).
+        frames_with_outlier_targets: TRC frame number -> targets dropped in that frame because they
+            lay metres from the rest of the body (tracking.input_checks.drop_outlier_targets).
         frames_with_disabled_views: TRC frame number -> cameras whose silhouette was empty.
         solver_levels: per level of the priority stack, its status, residual and sacrifice at
             each frame.
@@ -247,6 +249,7 @@ class TrackingReport:
     solver_levels: SolverLevelsReport = field(default_factory=SolverLevelsReport)
     inside_fraction_per_view: dict[str, list[float | None]] = field(default_factory=dict)
     solve_seconds: float | None = None
+    frames_with_outlier_targets: dict[str, list[str]] = field(default_factory=dict)
     units: dict[str, str] = field(default_factory=lambda: dict(UNITS))
 
     @classmethod
@@ -259,6 +262,7 @@ class TrackingReport:
         times_s: np.ndarray,
         frame_rate_hz: float,
         axes: AxesChoice,
+        outliers: np.ndarray | None = None,
     ) -> TrackingReport:
         """The report of one tracking run.
 
@@ -270,6 +274,7 @@ class TrackingReport:
             frame_numbers: (F,) the TRC's frame numbers; times_s: (F,) its times [s].
             frame_rate_hz: the TRC's data rate [Hz].
             axes: the TRC's axis convention.
+            outliers: (F, T) bool, the targets dropped as outliers (columns: result.target_names).
         """
         numbers = [int(number) for number in frame_numbers]
 
@@ -304,15 +309,18 @@ class TrackingReport:
                                       for index, name in enumerate(camera_names)
                                       if result.inside_fraction.shape == result.overlap.shape},
             solve_seconds=_finite_or_none(result.solve_seconds),
+            frames_with_outlier_targets=by_frame(
+                [[] for _ in numbers] if outliers is None else
+                [[name for name, out in zip(result.target_names, row, strict=True) if out] for row in outliers]),
         )
 
     def to_dict(self) -> dict[str, Any]:
         """The report as plain JSON values (NaN and infinities as None)."""
-        return _json_ready(dataclasses.asdict(self))
+        return json_ready(dataclasses.asdict(self))
 
     def to_json(self) -> str:
         """Strict JSON text (no NaN or Infinity tokens), indented."""
-        return json.dumps(self.to_dict(), indent=2, allow_nan=False) + "\n"
+        return strict_json(self.to_dict())
 
     def write(self, path: str | Path) -> None:
         """Write to_json() to `path` atomically."""
@@ -343,23 +351,6 @@ class TrackingReport:
             else:
                 lines.append(f"  {name:<{width}}  {1000 * stats.mean:7.1f}  ({1000 * stats.max:.1f})")
         return lines
-
-
-def _json_ready(value: Any) -> Any:
-    """Plain JSON values: numpy numbers and arrays converted, NaN and infinities as None."""
-    if isinstance(value, dict):
-        return {str(key): _json_ready(item) for key, item in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_ready(item) for item in value]
-    if isinstance(value, np.ndarray):
-        return _json_ready(value.tolist())
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        return _finite_or_none(value)
-    return value
 
 
 __all__ = ["FRAME_NUMBERING", "UNITS", "ResidualStats", "SolverLevelsReport", "TrackingReport", "TrcAxesReport"]

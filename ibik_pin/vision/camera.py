@@ -267,7 +267,7 @@ def select_cameras(cameras: Sequence[Camera], names: Sequence[str]) -> list[Came
     unknown = [name for name in names if name not in by_name]
     if unknown:
         raise UnknownNameError(
-            f"names: unknown camera name(s) {unknown}; available cameras: {list(by_name)}"
+            f"--cameras: unknown camera name(s) {unknown}; the calibration has {list(by_name)}"
         )
     repeated = sorted({name for name in names if list(names).count(name) > 1})
     if repeated:

@@ -17,7 +17,7 @@ import numpy as np
 from ibik_pin.checks import as_mask
 from ibik_pin.exceptions import FileFormatError, InputError
 from ibik_pin.io.files import PathLike
-from ibik_pin.io.masks import IMAGE_SUFFIXES
+from ibik_pin.io.masks import IMAGE_SUFFIXES, read_image
 from ibik_pin.io.video import VideoReader, read_frames
 
 __all__ = ["TemporalMajority", "silhouettes_from_video"]
@@ -67,10 +67,7 @@ def _background_frames(paths: Sequence[PathLike], size: tuple[int, int]) -> Iter
     """Frames of background images and videos, each checked against the video size (w, h)."""
     for path in map(Path, paths):
         if path.suffix.lower() in IMAGE_SUFFIXES:
-            image = cv2.imread(str(path), cv2.IMREAD_COLOR) if path.is_file() else None
-            if image is None:
-                raise FileFormatError(f"background file '{path}': expected a readable image, found none")
-            frames: Iterator[np.ndarray] = iter([image])
+            frames: Iterator[np.ndarray] = iter([read_image(path, cv2.IMREAD_COLOR, "background")])
         else:
             frames = read_frames(path, None)
         for frame in frames:

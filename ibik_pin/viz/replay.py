@@ -7,7 +7,6 @@ title and the motion's data, as JSON, take the places of its ``@TITLE@`` and ``@
 from __future__ import annotations
 
 import html
-import json
 import os
 import re
 from importlib import resources
@@ -15,7 +14,7 @@ from importlib import resources
 import numpy as np
 
 from ibik_pin.exceptions import InputError
-from ibik_pin.io.files import write_text_atomically
+from ibik_pin.io.files import strict_json, write_text_atomically
 
 __all__ = ["write_html_replay"]
 
@@ -149,7 +148,7 @@ def write_html_replay(
         ],
     }
     # "<" escaped so that no name can close the <script> element holding the data.
-    data_json = json.dumps(metadata, separators=(",", ":")).replace("<", "\\u003c")
+    data_json = strict_json(metadata, indent=None).replace("<", "\\u003c")
     for index, (array, array_finite) in enumerate(zip(points, finite, strict=True)):
         data_json = data_json.replace(f'"@POSITIONS{index}@"', _json_integers(array, array_finite))
     # One pass, so that neither the title nor the data can bring in a placeholder.
