@@ -276,6 +276,11 @@ def scale_human(body: BodyModel, lengths: Mapping[str, float]) -> BodyModel:
             f"lengths: the model {body.model.name!r} lacks the keypoints of {unmeasurable}; scale_human "
             "expects example-robot-data's human (load_human)"
         )
+    degenerate = [name for name in requested if name not in _OFFSET_LENGTHS and not model_lengths[name] > 1e-6]
+    if degenerate:
+        source = f"URDF file {str(body.urdf_path)!r}" if body.urdf_path is not None else f"model {body.model.name!r}"
+        raise InputError(f"{source}: the segment(s) {', '.join(degenerate)} have no length (their joints' "
+                         "origins coincide), so the model cannot be scaled to the subject")
     ratios = [requested[name] / model_lengths[name] for name in requested if name not in _OFFSET_LENGTHS]
     mean_ratio = float(np.mean(ratios)) if ratios else 1.0
     model = copy.deepcopy(body.model)
