@@ -12,10 +12,10 @@ than ``min_depth_px`` are left out: there the ridge is made of the spurs a noisy
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
 from ibik_pin.exceptions import InputError
+from ibik_pin.vision.support import box_around, distance_to_background
 
 __all__ = ["medial_axis_pixels"]
 
@@ -45,7 +45,9 @@ def medial_axis_pixels(
     inside = (mask != 0).astype(np.uint8)
     if not inside.any():
         return np.zeros((0, 2))
-    depth = cv2.distanceTransform(np.pad(inside, 1), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    # Only the silhouette's bounding box: outside it the depth is 0 and no pixel is on the ridge.
+    box_rows, box_columns = box_around(inside)
+    depth = distance_to_background(np.pad(inside[box_rows, box_columns], 1))
     centre = depth[1:-1, 1:-1]
     ridge = np.zeros(centre.shape, dtype=bool)
     height, width = centre.shape
@@ -58,10 +60,12 @@ def medial_axis_pixels(
     rows, columns = np.nonzero(ridge)
     if rows.size == 0:
         return np.zeros((0, 2))
+    depths = centre[rows, columns]
+    rows, columns = rows + box_rows.start, columns + box_columns.start  # image coordinates
     spacing = int(spacing_px)
-    # One pixel per block: the deepest, so the kept sample sits on the ridge's crest.
-    blocks = (rows // spacing) * ((width + spacing - 1) // spacing) + columns // spacing
-    order = np.lexsort((-centre[rows, columns], blocks))
+    # One pixel per block of the image's grid: the deepest, so the kept sample sits on the crest.
+    blocks = (rows // spacing) * ((inside.shape[1] + spacing - 1) // spacing) + columns // spacing
+    order = np.lexsort((-depths, blocks))
     first = np.ones(order.size, dtype=bool)
     first[1:] = blocks[order[1:]] != blocks[order[:-1]]
     kept = order[first]

@@ -1,0 +1,242 @@
+"""Speed of the solve loop, in the paper's setting and on the whole body, against Pink.
+
+Measures in one run:
+- arm: the paper's 6-DOF arm chain (experiments/paper/section4.py) on a 150-frame boxing window,
+  15 iterations per frame, support images built from 640 x 480 masks every frame, 1 and 2 views,
+  with and without the image term: frames/s;
+- whole body: `ibik track` (the human with a free flyer, subject calibrated on a static trial) on
+  real motion (CMU boxing, the real-mocap benchmark's inputs: silhouettes of another body, 640 x 480),
+  2 and 4 views, liegeois, stack and qp: report.json's frames/s, and the median time of one solver
+  step with the image term and of one without (timed around HierarchicalQPSolver.compute_step);
+- Pink (`pip install -e '.[bench]'`; skipped without it): one IK step toward the same targets from
+  the same configurations (each frame's targets from the previous frame's solution), DAQP and
+  ProxQP, position tasks on the same keypoint frames, a posture task, limits in Pink's QP;
+- the time split of the qp run with 2 views by part (cProfile's own times grouped by function), and
+  the process's peak memory.
+
+A benchmark, not a test: absolute times on a shared 2-core machine are indicative, ratios less so.
+
+Usage: python experiments/benchmark.py --out out/benchmark [--json PATH] [--frames 120]
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: see ibik_pin/cli.py
+
+import argparse
+import contextlib
+import cProfile
+import pstats
+import resource
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from paper.section4 import load_motion, prepare_clip, render_views, run_chain, subset_views
+from realdata.clips import CLIPS
+from realdata.inputs import prepare_inputs
+from realdata.runner import run_variant, variant
+
+from ibik_pin.io.files import strict_json
+from ibik_pin.io.trc import read_trc
+from ibik_pin.solvers.hqp import HierarchicalQPSolver
+from ibik_pin.tasks.base import GradientTask
+from ibik_pin.tracking.pipeline import TrackJob, prepare_body
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+BOXING = CLIPS["boxing_a"]
+SCHEMES = ("liegeois", "stack", "qp")
+# What each part of the solve loop is, by the functions cProfile times (module path fragments and
+# function names); a function in no group counts as "other".
+PARTS = {
+    "kinematics": ("configuration.py", "pinocchio"),
+    "projection and sampling": ("pinhole.py", "tasks/image.py", "silhouette_axis.py", "segments.py"),
+    "support images": ("support.py", "medial_axis.py", "distanceTransform", "views.py"),
+    "QP": ("_solve_level", "proxsuite", "_polish"),
+    "linear algebra": ("nullspace.py", "linalg", "einsum", "projection.py"),
+}
+
+
+class StepTimer:
+    """Times every HierarchicalQPSolver.compute_step while active, split by whether the levels hold
+    the image task."""
+
+    def __init__(self) -> None:
+        self.image: list[float] = []
+        self.blind: list[float] = []
+
+    @contextlib.contextmanager
+    def active(self):
+        original = HierarchicalQPSolver.compute_step
+
+        def timed(solver, configuration, levels, *args, **kwargs):
+            started = time.perf_counter()
+            step = original(solver, configuration, levels, *args, **kwargs)
+            with_image = any(isinstance(task, GradientTask) for level in levels for task in level)
+            (self.image if with_image else self.blind).append(time.perf_counter() - started)
+            return step
+
+        HierarchicalQPSolver.compute_step = timed  # type: ignore[method-assign]
+        try:
+            yield self
+        finally:
+            HierarchicalQPSolver.compute_step = original  # type: ignore[method-assign]
+
+    @staticmethod
+    def median_us(values: list[float]) -> float | None:
+        return float(np.median(values) * 1e6) if values else None
+
+
+def arm_fps(frames: int) -> dict:
+    """The paper's arm: frames/s with and without the image, 1 and 2 views."""
+    motion = load_motion(DATA / BOXING.file, BOXING.source)
+    start = int(round(BOXING.start_s * motion.frame_rate))
+    clip = prepare_clip("boxing_a", motion, BOXING.source, slice(start, start + 2 * frames, 2))
+    rig = render_views(clip, 4, seed=1)
+    results: dict = {}
+    for views in (1, 2):
+        subset = subset_views(rig, views)
+        row = {}
+        for label, method in (("image", "ibik"), ("blind", "pik")):
+            started = time.perf_counter()
+            run = run_chain("arm", clip, subset if method == "ibik" else None, method, "qp", iterations=15)
+            seconds = time.perf_counter() - started
+            row[label] = {"fps": len(clip.q) / seconds, "elbow_error_mm": run.mean_error_mm}
+        results[f"views_{views}"] = row
+    return results
+
+
+def whole_body(frames: int, cache: Path) -> tuple[dict, dict, cProfile.Profile]:
+    """`ibik track` per scheme and view count; the qp 2-view run profiled and its steps timed."""
+    inputs = prepare_inputs(BOXING, DATA, frames, cache)
+    results: dict = {scheme: {} for scheme in SCHEMES}
+    steps = StepTimer()
+    profile = cProfile.Profile()
+    out = cache.parent / "benchmark_runs"
+    for views in (2, 4):
+        for scheme in SCHEMES:
+            profiled = scheme == "qp" and views == 2
+            with steps.active() if profiled else contextlib.nullcontext():
+                if profiled:
+                    profile.enable()
+                run = run_variant(inputs, variant(f"ibik{views}v"), "clean", {"method": scheme},
+                                  out=out / f"{scheme}_{views}v")
+                if profiled:
+                    profile.disable()
+            results[scheme][f"views_{views}"] = {"fps": run.solve_fps, "judged_error_mm": run.judged_mm,
+                                                 "wall_s": run.wall_seconds}
+    blind = run_variant(inputs, variant("pik"), "clean", out=out / "pik")
+    results["pik"] = {"fps": blind.solve_fps, "judged_error_mm": blind.judged_mm}
+    results["qp"]["views_2"]["step_with_image_us"] = steps.median_us(steps.image)
+    results["qp"]["views_2"]["step_without_image_us"] = steps.median_us(steps.blind)
+    results["qp"]["views_2"]["steps_per_frame"] = (len(steps.image) + len(steps.blind)) / frames
+    return results, {"inputs": inputs, "q_run": out / "qp_2v"}, profile
+
+
+def pink_steps(inputs, run_folder: Path, frames: int) -> dict:
+    """One Pink step per frame toward that frame's targets, from our previous frame's solution."""
+    try:
+        import pink
+        from pink.tasks import FrameTask
+        from pink.tasks import PostureTask as PinkPosture
+    except ImportError:
+        return {"skipped": "pink is not installed (pip install -e '.[bench]')"}
+    targets = read_trc(inputs.targets("clean"))
+    names = list(targets.marker_names)
+    targets_m = targets.in_metres().positions
+    job = TrackJob(targets=inputs.targets("clean"), out=run_folder.parent / "unused", static=inputs.static)
+    body = prepare_body(job, names, targets_m)
+    q_rows = np.loadtxt(run_folder / "q.csv", delimiter=",", skiprows=1)
+    solved = q_rows[:, 1:]  # the first column is the time
+    results = {}
+    for backend in ("daqp", "proxqp"):
+        tasks = {name: FrameTask(body.keypoints[name], position_cost=1.0, orientation_cost=0.0) for name in names}
+        posture = PinkPosture(cost=1e-2)
+        durations, failed = [], 0
+        for frame in range(1, frames):
+            configuration = pink.Configuration(body.model, body.model.createData(), solved[frame - 1])
+            posture.set_target(solved[frame - 1])
+            present = [name for k, name in enumerate(names) if np.isfinite(targets_m[frame, k]).all()]
+            for name in present:
+                tasks[name].set_target(pin.SE3(np.eye(3), targets_m[frame, names.index(name)]))
+            active = [tasks[name] for name in present] + [posture]
+            started = time.perf_counter()
+            try:
+                pink.solve_ik(configuration, active, 1.0, solver=backend, safety_break=False)
+            except Exception:  # a failed QP is a measured outcome here
+                failed += 1
+            durations.append(time.perf_counter() - started)
+        results[backend] = {"step_us": float(np.median(durations) * 1e6), "failed_steps": failed,
+                            "steps": len(durations)}
+    return results
+
+
+def time_split(profile: cProfile.Profile) -> dict:
+    """Seconds of own time per part of the loop (PARTS), from the profile of one run."""
+    split = dict.fromkeys([*PARTS, "other"], 0.0)
+    for (path, _, function), (_, _, own, _, _) in pstats.Stats(profile).stats.items():  # type: ignore[attr-defined]
+        where = f"{path}:{function}"
+        part = next((name for name, marks in PARTS.items() if any(mark in where for mark in marks)), "other")
+        split[part] += own
+    return {part: round(seconds, 3) for part, seconds in split.items()}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--json", type=Path, help="where the figures go (default: OUT/benchmark.json)")
+    parser.add_argument("--frames", type=int, default=120)
+    parser.add_argument("--cache", type=Path, help="where the rendered inputs are kept (default: OUT/cache; the "
+                        "real-mocap benchmark's cache is reused when given)")
+    arguments = parser.parse_args()
+    arguments.out.mkdir(parents=True, exist_ok=True)
+    started = time.perf_counter()
+    arm = arm_fps(arguments.frames)
+    body, context, profile = whole_body(arguments.frames, arguments.cache or arguments.out / "cache")
+    pink_results = pink_steps(context["inputs"], context["q_run"], arguments.frames)
+    ours = body["qp"]["views_2"]
+    ratios = {}
+    for backend in ("daqp", "proxqp"):
+        if backend in pink_results and ours["step_with_image_us"]:
+            pink_step = pink_results[backend]["step_us"]
+            ratios[f"qp_image_step_over_pink_{backend}_step"] = ours["step_with_image_us"] / pink_step
+            ratios[f"qp_blind_step_over_pink_{backend}_step"] = ours["step_without_image_us"] / pink_step
+    figures = {"arm": arm, "whole_body": body, "pink": pink_results, "ratios": ratios,
+               "split_qp_2_views_s": time_split(profile),
+               "peak_memory_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+               "frames": arguments.frames, "wall_s": time.perf_counter() - started}
+    lines = ["| setting | frames/s | error [mm] |", "| --- | ---: | ---: |"]
+    for views, row in arm.items():
+        for label, values in row.items():
+            lines.append(f"| arm, {views.replace('_', ' ')}, {label} | {values['fps']:.0f} | "
+                         f"{values['elbow_error_mm']:.1f} |")
+    for scheme in SCHEMES:
+        for views, values in body[scheme].items():
+            lines.append(f"| whole body {scheme}, {views.replace('_', ' ')} | {values['fps']:.1f} | "
+                         f"{values['judged_error_mm']:.1f} |")
+    lines.append(f"| whole body, blind (PIK) | {body['pik']['fps']:.1f} | {body['pik']['judged_error_mm']:.1f} |")
+    lines += ["", "| one step | median [us] |", "| --- | ---: |",
+              f"| ours, qp, with the image (2 views) | {ours['step_with_image_us']:.0f} |",
+              f"| ours, qp, without the image | {ours['step_without_image_us']:.0f} |"]
+    lines += [f"| Pink + {backend} | {values['step_us']:.0f} |" for backend, values in pink_results.items()
+              if isinstance(values, dict)]
+    lines += ["", "| part of the qp run, 2 views | own time [s] |", "| --- | ---: |"]
+    lines += [f"| {part} | {seconds:.2f} |" for part, seconds in figures["split_qp_2_views_s"].items()]
+    lines += ["", f"ratios: {', '.join(f'{k} {v:.2f}' for k, v in ratios.items())}; steps per frame "
+              f"{ours['steps_per_frame']:.1f}; peak memory {figures['peak_memory_mb']:.0f} MB; "
+              f"{figures['wall_s']:.0f} s in all"]
+    table = "\n".join(lines)
+    print(table)
+    (arguments.out / "benchmark.md").write_text(f"`python experiments/benchmark.py --out {arguments.out}`\n\n{table}\n")
+    (arguments.json or arguments.out / "benchmark.json").write_text(strict_json(figures))
+
+
+if __name__ == "__main__":
+    main()

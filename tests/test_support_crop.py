@@ -1,0 +1,60 @@
+"""Distance transforms over the silhouette's bounding box only give what the whole frame gives."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from ibik_pin.vision.medial_axis import medial_axis_pixels
+from ibik_pin.vision.support import _signed_distance, distance_to_background
+
+
+def random_silhouettes(seed: int, count: int, size=(120, 160)):
+    """Ellipse unions, some cut by the image's edges (seeded)."""
+    rng = np.random.default_rng(seed)
+    height, width = size
+    for _ in range(count):
+        mask = np.zeros(size, np.uint8)
+        for _ in range(int(rng.integers(1, 5))):
+            centre = (int(rng.integers(-10, width + 10)), int(rng.integers(-10, height + 10)))
+            axes = (int(rng.integers(2, 40)), int(rng.integers(2, 40)))
+            cv2.ellipse(mask, centre, axes, float(rng.uniform(0.0, 180.0)), 0, 360, 1, -1)
+        if mask.any() and not mask.all():
+            yield mask
+
+
+def whole_frame_signed_distance(mask: np.ndarray) -> np.ndarray:
+    mask_u8 = mask.astype(np.uint8)
+    inside, outside = distance_to_background(mask_u8), distance_to_background(1 - mask_u8)
+    return np.where(mask.astype(bool), inside - 0.5, 0.5 - outside).astype(np.float32)
+
+
+def test_the_signed_distance_from_the_bounding_box_equals_the_whole_frames():
+    masks = list(random_silhouettes(seed=3, count=150))
+    assert len(masks) > 100
+    for mask in masks:
+        assert np.array_equal(_signed_distance(mask.astype(bool)), whole_frame_signed_distance(mask))
+
+
+def test_the_exact_distance_does_not_depend_on_the_part_of_the_image_transformed():
+    for mask in random_silhouettes(seed=4, count=50):
+        rows = np.flatnonzero(mask.any(axis=1))
+        columns = np.flatnonzero(mask.any(axis=0))
+        grown = (slice(max(rows[0] - 1, 0), rows[-1] + 2), slice(max(columns[0] - 1, 0), columns[-1] + 2))
+        assert np.array_equal(distance_to_background(mask)[grown], distance_to_background(mask[grown]))
+
+
+@pytest.mark.parametrize("seed", [5, 6])
+def test_the_medial_axis_from_the_bounding_box_equals_the_whole_frames(seed):
+    # Two lone pixels in opposite corners stretch the bounding box over the whole frame without
+    # touching the ridge (they are 1 px deep, under min_depth_px): the whole-frame path, to compare.
+    checked = 0
+    for mask in random_silhouettes(seed=seed, count=120):
+        if mask[:4, :4].any() or mask[-4:, -4:].any():
+            continue
+        whole = mask.copy()
+        whole[0, 0] = whole[-1, -1] = 1
+        assert np.array_equal(medial_axis_pixels(mask), medial_axis_pixels(whole))
+        checked += 1
+    assert checked > 50
