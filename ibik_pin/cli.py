@@ -52,6 +52,10 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", help="URDF of the human (default: example-robot-data's)")
     parser.add_argument("--method", choices=sorted(SOLVERS), default="qp",
                         help="solver scheme (default: qp, the hierarchical QP with joint limits)")
+    parser.add_argument("--step-tolerance", type=float, metavar="RAD",
+                        help="end a frame's solve early once a step moves the joints less than this "
+                             "(norm of dq); report.json gives the mean steps per frame (default: always "
+                             "--iterations)")
     parser.add_argument("--no-image", action="store_true",
                         help="the same solve without the image criterion (blind baseline)")
     parser.add_argument("--iterations", type=int, default=15, help="solver steps per frame")
@@ -100,6 +104,7 @@ def _job(arguments: argparse.Namespace) -> TrackJob:
         cameras=[name.strip() for name in arguments.cameras.split(",")] if arguments.cameras else None,
         model=arguments.model,
         settings=TrackingSettings(method=arguments.method, iterations=arguments.iterations,
+                                  step_tolerance=arguments.step_tolerance,
                                   use_image=not arguments.no_image, mask_filter_radius=arguments.mask_filter,
                                   criterion=arguments.criterion, swivel_search=arguments.swivel_search,
                                   image_moves=arguments.image_moves,

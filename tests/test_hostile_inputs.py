@@ -377,6 +377,8 @@ REFUSED: list[tuple[str, Callable[[Case], list[str]], str]] = [
     ("iterations-zero", lambda c: c.arguments(iterations="0"), r"--iterations"),
     ("iterations-huge", lambda c: c.arguments(iterations="1000000000"), r"--iterations"),
     ("iterations-negative", lambda c: c.arguments(iterations="-5"), r"--iterations"),
+    ("step-tolerance-negative", lambda c: c.arguments("--step-tolerance", "-1"), r"--step-tolerance"),
+    ("step-tolerance-nan", lambda c: c.arguments("--step-tolerance", "nan"), r"--step-tolerance"),
     ("mask-filter-huge", lambda c: c.arguments("--mask-filter", "31"), r"--mask-filter"),
     ("mask-filter-negative", lambda c: c.arguments("--mask-filter", "-2"), r"--mask-filter"),
     ("masks-is-a-file", _setup_black_mask_folder_as_file, r"masks_file"),

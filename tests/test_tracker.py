@@ -43,6 +43,15 @@ def test_blind_tracking_reaches_every_target_of_every_frame(human, sequence):
     assert result.dropped_targets == [[]] * FRAMES
 
 
+def test_a_step_tolerance_ends_converged_frames_early_and_the_steps_are_recorded(human, sequence):
+    _, targets = sequence
+    fixed = Tracker(human, settings=fast_settings(iterations=20)).track(TARGETS, targets)
+    early = Tracker(human, settings=fast_settings(iterations=20, step_tolerance=1e-3)).track(TARGETS, targets)
+    assert fixed.iterations[1:] == [20] * (FRAMES - 1)
+    assert all(steps < 20 for steps in early.iterations[1:]), early.iterations
+    assert np.nanmax(early.target_distances) < 1e-4
+
+
 def test_every_frame_keeps_the_solvers_report_of_each_level(human, sequence):
     _, targets = sequence
     # 20 steps: with 10 the upper level ends some 1e-6 m short on most seeds, reported "relaxed"

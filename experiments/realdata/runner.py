@@ -91,6 +91,10 @@ def variant(name: str) -> Variant:
     raise UnknownNameError(f"variant: expected ik, pik or ibik<N>v (e.g. ibik2v), got {name!r}")
 
 
+# Settings whose default is None and whose value is otherwise a number.
+FLOAT_OR_NONE = ("step_tolerance",)
+
+
 def parse_settings(pairs: typing.Iterable[str]) -> dict:
     """TrackingSettings overrides from "key=value" strings, each value typed like the field's default.
 
@@ -114,6 +118,8 @@ def parse_settings(pairs: typing.Iterable[str]) -> dict:
                 value = text.lower() in ("true", "1", "yes")
             elif isinstance(default, (int, float, str)):
                 value = type(default)(text)
+            elif default is None and key in FLOAT_OR_NONE:
+                value = None if text.lower() == "none" else float(text)
             else:
                 value = text
         except ValueError:

@@ -63,6 +63,9 @@ def check_run_bounds(settings: TrackingSettings) -> None:
                                      ("--mask-filter", settings.mask_filter_radius, 0, MAX_MASK_FILTER_RADIUS)):
         if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
             raise InputError(f"{option}: expected a whole number from {low} to {high}, found {value!r}")
+    tolerance = settings.step_tolerance
+    if tolerance is not None and not (isinstance(tolerance, (int, float)) and np.isfinite(tolerance) and tolerance > 0):
+        raise InputError(f"--step-tolerance: expected a positive number of radians, found {tolerance!r}")
 
 
 @dataclass

@@ -35,6 +35,8 @@ UNITS = {
     "solve_seconds": "s: wall time of the solves alone (no reading or writing)",
     "solve_frames_per_second": "frames per second of solve_seconds",
     "iterations_per_frame": "solver steps per frame after the first",
+    "mean_iterations_per_frame": "solver steps of a frame's main solve, mean over the frames after the first",
+    "step_tolerance": "rad: the step norm under which a frame's main solve stops (null: never early)",
     "mask_filter_radius": "frames on each side of the temporal majority filter",
     "end_effector_residual_m": "m: per frame, the mean distance of the present targets to the model's keypoints",
     "keypoint_residual_m": "m: per target keypoint, the distance of the model's keypoint to its target",
@@ -204,6 +206,9 @@ class TrackingReport:
         image: whether the image criterion was used.
         criterion: the image criterion ("paper" or "two-way").
         iterations_per_frame: solver steps per frame after the first.
+        mean_iterations_per_frame: steps the main solves took, mean over the frames after the
+            first (below iterations_per_frame when step_tolerance stops them early).
+        step_tolerance: the settings' step_tolerance [rad], or None.
         mask_filter_radius: temporal majority filter radius of the silhouettes [frames].
         solve_frames_per_second: frames solved per second of solver time [Hz]; None if unmeasured.
         cameras: the cameras whose images were used (empty when blind).
@@ -250,6 +255,8 @@ class TrackingReport:
     inside_fraction_per_view: dict[str, list[float | None]] = field(default_factory=dict)
     solve_seconds: float | None = None
     frames_with_outlier_targets: dict[str, list[str]] = field(default_factory=dict)
+    mean_iterations_per_frame: float | None = None
+    step_tolerance: float | None = None
     units: dict[str, str] = field(default_factory=lambda: dict(UNITS))
 
     @classmethod
@@ -309,6 +316,9 @@ class TrackingReport:
                                       for index, name in enumerate(camera_names)
                                       if result.inside_fraction.shape == result.overlap.shape},
             solve_seconds=_finite_or_none(result.solve_seconds),
+            mean_iterations_per_frame=(float(np.mean(result.iterations[1:])) if len(result.iterations) > 1
+                                       else None),
+            step_tolerance=settings.step_tolerance,
             frames_with_outlier_targets=by_frame(
                 [[] for _ in numbers] if outliers is None else
                 [[name for name, out in zip(result.target_names, row, strict=True) if out] for row in outliers]),

@@ -83,6 +83,8 @@ class TrackingSettings:
             (BodyModel.limb_coordinates) for the steps with the image, so the image moves only
             the arms and legs; "all": the paper's scheme, every step with every level.
         target_iterations: the targets-only steps of each frame with image_moves="limbs".
+        step_tolerance: stop a frame's main solve (the image steps, or the blind steps without
+            the image) once a step's norm |dq| falls below this [rad]; None: always `iterations`.
         stack: the priority levels and their tasks (tracking.stack); None: Stack.default(). An
             image task's criterion, step and views, when the stack gives them, replace
             `criterion`, `image_step` and the cameras; a posture task's weight `posture_weight`.
@@ -104,6 +106,7 @@ class TrackingSettings:
     feet_by_ankle: bool = True
     image_moves: str = "limbs"
     target_iterations: int = 5
+    step_tolerance: float | None = None
     stack: Stack | None = None
 
 
@@ -138,6 +141,8 @@ class TrackingResult:
             the swivel pass.
         level_outcomes: per frame, per stack level (L), its status, residual, criterion and how
             much of it the levels above sacrificed, at the frame's solution (tracking.outcomes).
+        iterations: per frame, the steps of its main solve (fewer than the settings' with
+            `step_tolerance`; the first frame's are its search's).
     """
 
     q: np.ndarray
@@ -156,6 +161,7 @@ class TrackingResult:
     level_outcomes: list[list[LevelOutcome]] = field(default_factory=list)
     inside_fraction: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     camera_names: list[str] = field(default_factory=list)
+    iterations: list[int] = field(default_factory=list)
 
     @property
     def frames_per_second(self) -> float:
@@ -251,8 +257,9 @@ class Tracker:
         """
         iterations = self.settings.iterations if iterations is None else iterations
         levels = plan.solver_levels
+        tolerance = self.settings.step_tolerance
         if plan.image_level is None:
-            return self.solver.solve(configuration, levels, iterations=iterations)
+            return self.solver.solve(configuration, levels, iterations=iterations, tolerance=tolerance)
         search = self._search_swivels and bool(free)
         # The targets' levels alone, for one closing step: a foot point's task sees only the ankle
         # (feet.foot_point_joints), so the image's last step, which turns the hip, moves the toe
@@ -260,7 +267,7 @@ class Tracker:
         # the ankle (toes 0.7 -> 11.9 mm on real walking without it, 2 views).
         above_image = list(levels[:plan.image_level])
         if self._trunk_hold is None:
-            solved = self.solver.solve(configuration, levels, iterations=iterations)
+            solved = self.solver.solve(configuration, levels, iterations=iterations, tolerance=tolerance)
             hints = self._swivel_hints(configuration, free) if search else []
             if hints:
                 self.solver.solve(configuration, plan.with_level_above_image(hints), iterations=iterations)
@@ -271,13 +278,13 @@ class Tracker:
         self._trunk_hold.set_reference(configuration.q)
         hints = self._swivel_hints(configuration, free) if search else []
         hinted = plan.with_level_above_image(hints) if hints else levels
-        solved = self.solver.solve(configuration, [[self._trunk_hold], *hinted], iterations=iterations)
+        solved = self.solver.solve(configuration, [[self._trunk_hold], *hinted], iterations=iterations,
+                                   tolerance=tolerance)
         self.solver.solve(configuration, [[self._trunk_hold], *above_image], iterations=1)
         reports = solved.levels[1:]
         if hints:
             del reports[plan.image_level]  # the hints' level, inserted just above the image's
         return dataclasses.replace(solved, levels=reports)
-
 
     def track(
         self,
@@ -361,6 +368,7 @@ class Tracker:
             else:
                 solved = self._solve(configuration, plan, free=free)
             result.level_reports.append(solved.levels)
+            result.iterations.append(int(solved.iterations))
             result.solve_seconds += time.perf_counter() - started
             result.q[frame] = configuration.q
             result.keypoints[frame] = configuration.frame_positions(keypoint_ids)
