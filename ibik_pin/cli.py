@@ -101,7 +101,7 @@ def _job(arguments: argparse.Namespace) -> TrackJob:
         masks=arguments.masks,
         videos=arguments.videos,
         background=arguments.background,
-        cameras=[name.strip() for name in arguments.cameras.split(",")] if arguments.cameras else None,
+        cameras=None if arguments.cameras is None else [name.strip() for name in arguments.cameras.split(",")],
         model=arguments.model,
         settings=TrackingSettings(method=arguments.method, iterations=arguments.iterations,
                                   step_tolerance=arguments.step_tolerance,
@@ -137,6 +137,10 @@ def _calibrate(arguments: argparse.Namespace) -> None:
     frame_range = parse_frame_range(arguments.frames) if arguments.frames else (None, None)
     if arguments.out.suffix.lower() != ".urdf":
         raise IbikError(f"--out: expected a file name ending in .urdf, got {str(arguments.out)!r}")
+    for option, given in (("the static trial", arguments.static), ("--model", arguments.model)):
+        if given is not None and arguments.out.resolve() == Path(given).resolve():
+            raise IbikError(f"--out {arguments.out}: it is {option}, which writing the subject would replace; "
+                            "choose another file name")
     body = load_human(arguments.model) if arguments.model is not None else load_human()
     result = calibrate_static_trial(arguments.static, body, frame_range)
     notes = write_subject_urdf(result.body, arguments.out)

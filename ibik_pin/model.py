@@ -247,6 +247,12 @@ def load_human(urdf_path: str | Path | None = None, free_flyer: bool = True) -> 
         raise FileFormatError(f"URDF file {str(path)!r} cannot be parsed: {_urdf_reason(failure, parser)}") \
             from failure
     model.name = "human"
+    lacking = sorted({joint for joint, _ in _HUMAN_KEYPOINTS.values()
+                      if joint not in ("root_joint", "universe") and not model.existJointName(joint)})
+    if lacking:
+        raise FileFormatError(f"URDF file {str(path)!r}: not the human model: it lacks the joint(s) "
+                              f"{', '.join(lacking[:4])}{' and more' if len(lacking) > 4 else ''} that carry "
+                              "the keypoints (example-robot-data's human joint names are needed)")
     # name -> (link frame index, parent joint, placement), copied: addFrame reallocates the frames
     calibrated = {frame.name[len(KEYPOINT_LINK_PREFIX):]: (index, int(frame.parentJoint), frame.placement.copy())
                   for index, frame in enumerate(model.frames)

@@ -302,3 +302,15 @@ def test_a_mesh_that_cannot_be_found_is_dropped_with_a_note(tmp_path):
     assert "missing.STL" not in written
     assert written.count("<mesh ") == text.count("<mesh ") - 1
     assert "file://" in written and "package://" not in written
+
+
+def test_ibik_calibrate_refuses_to_write_over_its_own_model(recovery, tmp_path, capsys):
+    _, positions, _ = recovery
+    write_static(tmp_path / "static.trc", positions)
+    assert main(["calibrate", str(tmp_path / "static.trc"), "--out", str(tmp_path / "subject.urdf")]) == 0
+    before = (tmp_path / "subject.urdf").read_bytes()
+    code = main(["calibrate", str(tmp_path / "static.trc"), "--model", str(tmp_path / "subject.urdf"),
+                 "--out", str(tmp_path / "subject.urdf")])
+    error = capsys.readouterr().err
+    assert code == 2 and error.count("\n") == 1 and "it is --model" in error
+    assert (tmp_path / "subject.urdf").read_bytes() == before

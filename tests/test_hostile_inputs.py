@@ -364,6 +364,8 @@ REFUSED: list[tuple[str, Callable[[Case], list[str]], str]] = [
     ("calibration-broken-toml", _setup_calibration_broken, r"calibration\.toml"),
     ("calibration-empty", _setup_calibration_empty, r"calibration\.toml"),
     ("camera-not-in-calibration", lambda c: c.arguments("--cameras", "cam1,cam9"), r"cam9"),
+    ("cameras-empty", lambda c: c.arguments("--cameras", ""), r"--cameras: unknown camera name"),
+    ("cameras-repeated", lambda c: c.arguments("--cameras", "cam1,cam1"), r"--cameras: expected each camera"),
     # bounded: what is read and how long
     ("targets-dev-zero", lambda c: c.arguments(targets="/dev/zero"), r"/dev/zero.*not a regular file"),
     ("targets-a-folder", lambda c: c.arguments(targets=str(c.masks)), r"masks.*folder"),
@@ -386,6 +388,8 @@ REFUSED: list[tuple[str, Callable[[Case], list[str]], str]] = [
     ("mask-missing-one-frame", _setup_mask_missing, r"29 masks for camera 'cam2'"),
     # models and stacks
     ("model-not-xml", lambda c: c.arguments(model=_urdf(c, "not xml at all")), r"model\.urdf"),
+    ("model-not-the-human", lambda c: c.arguments(model=str(REPOSITORY / "models" / "planar_chain.urdf")),
+     r"planar_chain\.urdf': not the human model"),
     ("model-joint-without-limits", lambda c: c.arguments(model=_urdf(
         c, '<robot name="x"><link name="a"/><link name="b"/><joint name="j" type="revolute">'
            '<parent link="a"/><child link="b"/></joint></robot>')), r"model\.urdf.*limits"),

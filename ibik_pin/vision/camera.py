@@ -271,7 +271,7 @@ def select_cameras(cameras: Sequence[Camera], names: Sequence[str]) -> list[Came
         )
     repeated = sorted({name for name in names if list(names).count(name) > 1})
     if repeated:
-        raise InputError(f"names: expected each camera at most once, found {repeated} more than once")
+        raise InputError(f"--cameras: expected each camera at most once, found {repeated} more than once")
     return [by_name[name] for name in names]
 
 
