@@ -117,6 +117,24 @@ def test_written_file_has_the_opensim_layout(tmp_path):
     assert not list(tmp_path.glob(".*.tmp"))
 
 
+def test_a_windows_written_trc_reads_like_the_plain_one(tmp_path):
+    """A byte-order mark, CRLF line ends and a Windows-1252 file name in the header, as Windows
+    tools write them; a binary file is refused as such."""
+    data = TrcData(marker_names=["A", "B"], times=[0.0, 0.02],
+                   positions=[[[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]], [[7.0, 8.0, 9.0], [1.5, 2.5, 3.5]]],
+                   units="mm", data_rate=50.0, frame_numbers=[1, 2])
+    write_trc(tmp_path / "plain.trc", data)
+    text = (tmp_path / "plain.trc").read_text().replace("plain.trc", "pr\u00e9cis.trc")
+    (tmp_path / "windows.trc").write_bytes(b"\xef\xbb\xbf" + text.replace("\n", "\r\n").encode("utf-8"))
+    (tmp_path / "western.trc").write_bytes(text.encode("cp1252"))
+    for name in ("windows.trc", "western.trc"):
+        read = read_trc(tmp_path / name)
+        assert read.marker_names == ["A", "B"] and np.array_equal(read.positions, np.asarray(data.positions))
+    (tmp_path / "binary.trc").write_bytes(b"PathFileType\x00\x01\x02")
+    with pytest.raises(FileFormatError, match=r"binary\.trc: cannot read this TRC file: it is binary, not text"):
+        read_trc(tmp_path / "binary.trc")
+
+
 def test_empty_cells_and_rows_shorter_than_the_header_read_as_nan(tmp_path):
     path = small_trc(tmp_path, "1\t0.0\t1\t2\t3\t\t\t\n2\t0.02\t4\t\t6\n")
 

@@ -16,7 +16,7 @@ import tomli_w
 
 from ibik_pin.checks import as_finite_array, as_image_size
 from ibik_pin.exceptions import FileFormatError, InputError
-from ibik_pin.io.files import PathLike, checked_input_file, write_text_atomically
+from ibik_pin.io.files import PathLike, read_text, write_text_atomically
 from ibik_pin.vision.pinhole import PinholeCamera
 
 if sys.version_info >= (3, 11):
@@ -50,12 +50,10 @@ def read_calibration(path: PathLike) -> list[PinholeCamera]:
             wrong shape or is not finite, ``fisheye = true`` (not supported), two cameras share
             a name, or no camera section; the message names the file, section and key.
     """
-    path = checked_input_file(path, "calibration")
+    path = Path(path)
+    text = read_text(path, "calibration")  # a byte-order mark, which tomllib refuses, is dropped
     try:
-        with open(path, "rb") as stream:
-            document = tomllib.load(stream)
-    except OSError as error:
-        raise FileFormatError(f"calibration file '{path}': cannot be read ({error.strerror or error})") from None
+        document = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise FileFormatError(
             f"calibration file '{path}': expected valid TOML, found a syntax error: {error}"

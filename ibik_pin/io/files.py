@@ -79,17 +79,27 @@ def read_text(path: str | os.PathLike[str], what: str) -> str:
         what: The kind of file, for the message (e.g. ``"TRC"``).
 
     Returns:
-        Its content, universal newlines.
+        Its content, universal newlines. UTF-8, with or without the byte-order mark Windows tools
+        write; failing that Windows-1252, in which motion-capture software of Western locales writes
+        its headers (a file name with an accent).
 
     Raises:
-        FileFormatError: The file is missing, not a regular file, too large, unreadable or not
-            UTF-8 text.
+        FileFormatError: The file is missing, not a regular file, too large, unreadable, or text
+            in neither encoding (a binary file).
     """
     path = checked_input_file(path, what)
     try:
-        return path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as error:
-        raise FileFormatError(f"{path}: cannot read this {what} file: {error}") from error
+        data = path.read_bytes()
+    except OSError as error:
+        raise FileFormatError(f"{path}: cannot read this {what} file: {error.strerror or error}") from error
+    if b"\x00" in data:
+        raise FileFormatError(f"{path}: cannot read this {what} file: it is binary, not text")
+    for encoding in ("utf-8-sig", "cp1252"):
+        try:
+            return data.decode(encoding).replace("\r\n", "\n").replace("\r", "\n")
+        except UnicodeDecodeError:
+            continue
+    raise FileFormatError(f"{path}: cannot read this {what} file: it is neither UTF-8 nor Windows-1252 text")
 
 
 def is_number(text: str) -> bool:

@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from ibik_pin.exceptions import FileFormatError, InputError
-from ibik_pin.io.files import checked_input_file
+from ibik_pin.io.files import read_text
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -114,13 +114,9 @@ class Stack:
                 the message names the file, the level and the key.
         """
         try:
-            path = checked_input_file(path, "stack")
-            with open(path, "rb") as stream:
-                document = tomllib.load(stream)
+            document = tomllib.loads(read_text(path, "stack"))
         except FileFormatError as error:
             raise StackError(str(error)) from None
-        except OSError as error:
-            raise StackError(f"stack file {str(path)!r}: cannot be read ({error.strerror or error})") from None
         except tomllib.TOMLDecodeError as error:
             raise StackError(f"stack file {str(path)!r}: expected valid TOML, found a syntax error: {error}") from None
         return cls.from_dict(document, source=f"stack file {str(path)!r}")
