@@ -148,8 +148,11 @@ def _urdf(case: Case, text: str) -> str:
 
 
 def _masks_renamed(case: Case, renames: dict[str, str]) -> str:
+    """The masks folder with camera folders copied under new names (old -> new; old == new keeps
+    it), the old ones that no new name keeps removed."""
     for old, new in renames.items():
-        shutil.copytree(case.masks / old, case.masks / new) if old != new else None
+        if old != new:
+            shutil.copytree(case.masks / old, case.masks / new)
     for old in renames:
         if old not in renames.values():
             shutil.rmtree(case.masks / old)
@@ -219,7 +222,7 @@ def _setup_one_camera_blind(case):
     return case.arguments()
 
 
-def _setup_black_mask_folder_as_file(case):
+def _setup_masks_a_file(case):
     (case.root / "masks_file").write_text("not a folder")
     return case.arguments(masks=str(case.root / "masks_file"))
 
@@ -383,7 +386,7 @@ REFUSED: list[tuple[str, Callable[[Case], list[str]], str]] = [
     ("step-tolerance-nan", lambda c: c.arguments("--step-tolerance", "nan"), r"--step-tolerance"),
     ("mask-filter-huge", lambda c: c.arguments("--mask-filter", "31"), r"--mask-filter"),
     ("mask-filter-negative", lambda c: c.arguments("--mask-filter", "-2"), r"--mask-filter"),
-    ("masks-is-a-file", _setup_black_mask_folder_as_file, r"masks_file"),
+    ("masks-is-a-file", _setup_masks_a_file, r"masks_file"),
     ("mask-corrupt-png", _setup_corrupt_png, r"mask file .*000004\.png"),
     ("mask-missing-one-frame", _setup_mask_missing, r"29 masks for camera 'cam2'"),
     # models and stacks
