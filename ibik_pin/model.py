@@ -11,6 +11,7 @@ import copy
 import dataclasses
 import sys
 import xml.etree.ElementTree as ElementTree
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib import resources
 from itertools import pairwise
@@ -22,7 +23,7 @@ import pinocchio as pin
 from ibik_pin.exceptions import FileFormatError, InputError, UnknownNameError
 from ibik_pin.feet import add_foot_rotation
 from ibik_pin.io.files import checked_input_file
-from ibik_pin.io.native_output import NativeOutput, captured_native_stderr
+from ibik_pin.io.native_output import captured_native_stderr
 
 HUMAN_URDF_RELATIVE = Path("example-robot-data/robots/human_description/robots/human.urdf")
 #: Links of this prefix in a URDF are keypoints (``keypoint_Neck`` is the Neck), see load_human.
@@ -105,21 +106,23 @@ def load_urdf(path: str | Path, free_flyer: bool = False) -> pin.Model:
     path = Path(path)
     if not path.is_file():
         raise FileFormatError(f"URDF file {str(path)!r} does not exist")
-    with captured_native_stderr() as parser:  # urdfdom's reasons, quoted in the error
+    if free_flyer:
+        return _built_from_urdf(path, lambda: pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer()))
+    return _built_from_urdf(path, lambda: pin.buildModelFromUrdf(str(path)))
+
+
+def _built_from_urdf(path: Path, build: Callable[[], pin.Model]) -> pin.Model:
+    """`build()`'s model; its failure a FileFormatError naming the URDF, with Pinocchio's error and
+    urdfdom's first line ("Joint [j] is of type REVOLUTE but it does not specify limits"), which
+    urdfdom prints to stderr and says what is wrong."""
+    with captured_native_stderr() as parser:
         try:
-            if free_flyer:
-                return pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
-            return pin.buildModelFromUrdf(str(path))
+            return build()
         except (RuntimeError, ValueError) as error:
             failure = error
-    raise FileFormatError(f"URDF file {str(path)!r} cannot be parsed: {_urdf_reason(failure, parser)}") from failure
-
-
-def _urdf_reason(error: Exception, parser: NativeOutput) -> str:
-    """Pinocchio's error, with urdfdom's first line ("Error: Joint [j] is of type REVOLUTE but it
-    does not specify limits"), which says what is wrong, when it printed one."""
     said = parser.first_line().removeprefix("Error:").strip()
-    return f"{error} ({said})" if said else str(error)
+    reason = f"{failure} ({said})" if said else str(failure)
+    raise FileFormatError(f"URDF file {str(path)!r} cannot be parsed: {reason}") from failure
 
 
 def human_urdf_path() -> Path:
@@ -235,17 +238,8 @@ def load_human(urdf_path: str | Path | None = None, free_flyer: bool = True) -> 
     """
     path = Path(urdf_path) if urdf_path is not None else human_urdf_path()
     xml = ElementTree.tostring(human_urdf_tree(path).getroot(), encoding="unicode")
-    with captured_native_stderr() as parser:
-        try:
-            model = (pin.buildModelFromXML(xml, pin.JointModelFreeFlyer()) if free_flyer
-                     else pin.buildModelFromXML(xml))
-        except (RuntimeError, ValueError) as error:
-            failure: Exception | None = error
-        else:
-            failure = None
-    if failure is not None:
-        raise FileFormatError(f"URDF file {str(path)!r} cannot be parsed: {_urdf_reason(failure, parser)}") \
-            from failure
+    model = _built_from_urdf(path, lambda: pin.buildModelFromXML(xml, pin.JointModelFreeFlyer()) if free_flyer
+                             else pin.buildModelFromXML(xml))
     model.name = "human"
     lacking = sorted({joint for joint, _ in _HUMAN_KEYPOINTS.values()
                       if joint not in ("root_joint", "universe") and not model.existJointName(joint)})

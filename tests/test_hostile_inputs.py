@@ -31,6 +31,7 @@ from ibik_pin.cli import main
 from ibik_pin.demo import prepare_demo_inputs
 from ibik_pin.exceptions import FileFormatError, IbikError, IbikWarning, InputError
 from ibik_pin.io.calibration import read_calibration, write_calibration
+from ibik_pin.io.files import MAX_INPUT_BYTES
 from ibik_pin.io.trc import read_trc, write_trc
 from ibik_pin.model import human_urdf_path
 from ibik_pin.tracking.outdir import MARKER, OutputFolderError
@@ -53,36 +54,15 @@ def pristine(tmp_path_factory):
     return root
 
 
-@dataclasses.dataclass
 class Case:
     """One hostile run's folder: `inputs` (targets.trc, static.trc, calibration.toml, masks/) and
     `out`, an earlier output of ibik."""
 
-    root: Path
-
-    @property
-    def inputs(self) -> Path:
-        return self.root / "in"
-
-    @property
-    def out(self) -> Path:
-        return self.root / "out"
-
-    @property
-    def targets(self) -> Path:
-        return self.inputs / "targets.trc"
-
-    @property
-    def static(self) -> Path:
-        return self.inputs / "static.trc"
-
-    @property
-    def calibration(self) -> Path:
-        return self.inputs / "calibration.toml"
-
-    @property
-    def masks(self) -> Path:
-        return self.inputs / "masks"
+    def __init__(self, root: Path) -> None:
+        self.root = root
+        self.inputs, self.out = root / "in", root / "out"
+        self.targets, self.static = self.inputs / "targets.trc", self.inputs / "static.trc"
+        self.calibration, self.masks = self.inputs / "calibration.toml", self.inputs / "masks"
 
     def arguments(self, *extra: str, **options: str | None) -> list[str]:
         """`ibik track` on the case's inputs; options replace (None: remove) one of them."""
@@ -240,7 +220,7 @@ def _setup_mask_missing(case):
 def _setup_sparse_large(case):
     path = case.root / "huge.trc"
     with open(path, "wb") as handle:
-        handle.truncate((1 << 30) + 1)
+        handle.truncate(MAX_INPUT_BYTES + 1)
     return case.arguments(targets=str(path))
 
 

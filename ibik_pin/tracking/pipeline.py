@@ -105,8 +105,8 @@ class TrackJob:
             raise InputError("--masks and --videos: give one source of silhouettes, not both")
         if self.background is not None and self.videos is None:
             raise InputError("--background goes with --videos")
-        if self.trc_axes not in ("auto", "y-up", "z-up"):
-            raise InputError(f"--trc-axes: expected auto, y-up or z-up, found {self.trc_axes!r}")
+        if self.trc_axes not in ("auto", *TRC_AXES):
+            raise InputError(f"--trc-axes: expected auto, {', '.join(TRC_AXES)}, found {self.trc_axes!r}")
         check_run_bounds(self.settings)
 
     @property

@@ -319,8 +319,7 @@ class TrackingReport:
             mean_iterations_per_frame=(float(np.mean(result.iterations[1:])) if len(result.iterations) > 1
                                        else None),
             step_tolerance=settings.step_tolerance,
-            frames_with_outlier_targets=by_frame(
-                [[] for _ in numbers] if outliers is None else
+            frames_with_outlier_targets={} if outliers is None else by_frame(
                 [[name for name, out in zip(result.target_names, row, strict=True) if out] for row in outliers]),
         )
 

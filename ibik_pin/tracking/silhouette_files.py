@@ -27,6 +27,7 @@ VIDEO_SUFFIXES = {".mp4", ".avi", ".mov", ".mkv", ".m4v"}
 # size (Pose2Sim's demo: 1080 px wide, calibrated at 1088) is the same sensor, anything more is not.
 CODEC_ALIGNMENT_PX = 16
 
+
 @dataclass
 class Silhouettes:
     """Per camera, either mask files (read lazily) or decoded video silhouettes."""

@@ -216,7 +216,6 @@ class Tracker:
         self.use_image = self.settings.use_image and bool(self.cameras) and image is not None
         self.tasks = StackTasks(self.stack, body, self.image_criterion if self.use_image else None,
                                 self.settings.posture_weight, self._foot_point_joints)
-
         self._hint_tasks: dict[str, FramePositionTask] = {}
 
     def _foot_point_joints(self, name: str) -> np.ndarray | None:
