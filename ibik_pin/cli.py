@@ -40,14 +40,21 @@ if TYPE_CHECKING:
 def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
     # Paths stay text: TrackJob checks and converts them, and an empty one must reach it as such
     # (Path("") is the current folder).
-    parser.add_argument("--targets", required=True,
-                        help="OpenSim TRC of 3D keypoints (Pose2Sim names), m or mm")
+    parser.add_argument("--targets",
+                        help="OpenSim TRC of 3D keypoints (Pose2Sim names), m or mm; without it, --videos and "
+                             "--calibration: the keypoints are detected in every view and triangulated")
     parser.add_argument("--static", help="TRC of a static trial, to scale the model")
     parser.add_argument("--calibration", help="Pose2Sim calibration TOML")
     sources = parser.add_mutually_exclusive_group()
     sources.add_argument("--masks", help="folder with one sub-folder of masks per camera")
     sources.add_argument("--videos", help="folder with one video per camera")
-    parser.add_argument("--background", help="frames of the empty scene (with --videos)")
+    parser.add_argument("--background", help="frames of the empty scene (with --videos and --segmenter mog2)")
+    parser.add_argument("--segmenter", choices=("auto", "mediapipe", "mog2"), default="auto",
+                        help="silhouettes from --videos: mediapipe (MediaPipe Pose's person segmentation), mog2 "
+                             "(background subtraction); auto (default): mediapipe where installed")
+    parser.add_argument("--triangulated-limbs", action="store_true",
+                        help="without --targets: the triangulated elbows and knees become targets below the "
+                             "image (default: left to the image)")
     parser.add_argument("--cameras", help="comma-separated subset of the calibration's cameras")
     parser.add_argument("--model", help="URDF of the human (default: example-robot-data's)")
     parser.add_argument("--method", choices=sorted(SOLVERS), default="qp",
@@ -112,6 +119,8 @@ def _job(arguments: argparse.Namespace) -> TrackJob:
         overlay=arguments.overlay,
         quiet=arguments.quiet,
         trc_axes=arguments.trc_axes,
+        segmenter=arguments.segmenter,
+        triangulated_limbs=arguments.triangulated_limbs,
     )
 
 

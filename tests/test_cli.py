@@ -257,7 +257,7 @@ def write_videos(dataset, folder: Path, width: int) -> None:
 
 def test_videos_drive_track_and_an_encoder_aligned_width_is_padded_with_a_warning(dataset, tmp_path):
     write_videos(dataset, tmp_path / "videos", width=632)
-    arguments = track_arguments(dataset, tmp_path / "out")
+    arguments = track_arguments(dataset, tmp_path / "out", "--segmenter", "mog2")  # rendered bodies, no person
     index = arguments.index("--masks")
     arguments[index : index + 2] = ["--videos", str(tmp_path / "videos")]
     with pytest.warns(IbikWarning, match="frames are 632 x 480 px, camera 'cam[12]' 640 x 480 px"):

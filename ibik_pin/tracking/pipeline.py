@@ -43,6 +43,14 @@ from ibik_pin.tracking.outdir import check_outdir, make_staging, publish
 from ibik_pin.tracking.report import TrackingReport
 from ibik_pin.tracking.silhouette_files import Silhouettes, camera_folder_entries, fit_to_size, load_silhouettes
 from ibik_pin.tracking.tracker import Tracker, TrackingResult, TrackingSettings
+from ibik_pin.tracking.video_inputs import (
+    SEGMENTERS,
+    SilhouetteQuality,
+    TriangulationReport,
+    read_videos,
+    restrict_to_subject,
+    silhouette_quality,
+)
 from ibik_pin.vision.camera import cameras_in_frame, select_cameras
 from ibik_pin.viz.overlay import write_overlay_video
 from ibik_pin.viz.plots import Panel, plot_panels
@@ -77,7 +85,7 @@ class TrackJob:
     own world); see tracking.axes.
     """
 
-    targets: Path
+    targets: Path | None
     out: Path
     static: Path | None = None
     calibration: Path | None = None
@@ -90,6 +98,8 @@ class TrackJob:
     overlay: bool = False
     quiet: bool = False
     trc_axes: str = "auto"
+    segmenter: str = "auto"
+    triangulated_limbs: bool = False
 
     def __post_init__(self) -> None:
         """Paths given as str become Paths; what the CLI refuses, the API refuses too (InputError)."""
@@ -105,6 +115,16 @@ class TrackJob:
             raise InputError("--masks and --videos: give one source of silhouettes, not both")
         if self.background is not None and self.videos is None:
             raise InputError("--background goes with --videos")
+        if self.targets is None and (self.videos is None or self.calibration is None):
+            raise InputError("--targets: needed unless --videos and --calibration are given (then the end "
+                             "effectors are triangulated from the videos)")
+        if self.triangulated_limbs and self.targets is not None:
+            raise InputError("--triangulated-limbs goes with --videos without --targets")
+        if self.triangulated_limbs and self.settings.stack is not None:
+            raise InputError("--triangulated-limbs and --stack: give the elbows and knees a level in your "
+                             "stack instead")
+        if self.segmenter not in SEGMENTERS:
+            raise InputError(f"--segmenter: expected one of {', '.join(SEGMENTERS)}, found {self.segmenter!r}")
         if self.trc_axes not in ("auto", *TRC_AXES):
             raise InputError(f"--trc-axes: expected auto, {', '.join(TRC_AXES)}, found {self.trc_axes!r}")
         check_run_bounds(self.settings)
@@ -113,6 +133,11 @@ class TrackJob:
     def inputs(self) -> list[Path | None]:
         """Every input path of the job (None for those not given)."""
         return [self.targets, self.static, self.calibration, self.masks, self.videos, self.background, self.model]
+
+
+def trc_stem(job: TrackJob) -> str:
+    """The targets file's name without its suffix, to name what is written from it."""
+    return job.targets.stem if job.targets is not None else "targets"
 
 
 def _trc_in_metres(option: str, path: Path) -> tuple[TrcData, np.ndarray, np.ndarray]:
@@ -130,7 +155,7 @@ def _trc_in_metres(option: str, path: Path) -> tuple[TrcData, np.ndarray, np.nda
     return data, positions_m, outliers
 
 
-def _check_names(path: Path, names: Sequence[str], body: BodyModel) -> None:
+def _check_names(path: Path | None, names: Sequence[str], body: BodyModel) -> None:
     unknown = [name for name in names if name not in body.keypoints]
     if unknown:
         raise InputError(
@@ -196,18 +221,23 @@ def run_track(job: TrackJob) -> TrackingReport:
 
 def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
     """Read, check, track and write every output into `staging`."""
+    cameras: list = []
+    if job.calibration is not None:
+        cameras = cameras_in_frame(read_calibration(job.calibration), POSE2SIM_TRC_TO_WORLD)
+        if job.cameras:
+            cameras = select_cameras(cameras, job.cameras)
+    # Without --targets the videos' keypoints are triangulated into staging and read back as targets.
+    videos = read_videos(staging, job, cameras)
+    job = videos.job
+    if job.targets is None:  # TrackJob refuses this unless the videos give the targets
+        raise InputError("--targets: expected a TRC, or --videos and --calibration to triangulate one")
     trc, targets_trc_m, outliers = _trc_in_metres("--targets", job.targets)
     names = list(trc.marker_names)
     frame_count = targets_trc_m.shape[0]
     if frame_count == 0:
         raise InputError(f"--targets {job.targets}: no frame")
-    cameras: list = []
     silhouettes = None
     use_image = job.settings.use_image
-    if job.calibration is not None:
-        cameras = cameras_in_frame(read_calibration(job.calibration), POSE2SIM_TRC_TO_WORLD)
-        if job.cameras:
-            cameras = select_cameras(cameras, job.cameras)
     if use_image:
         if not cameras:
             raise InputError("the image criterion needs --calibration with --masks or --videos "
@@ -217,34 +247,43 @@ def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
         conventions = TRC_AXES if job.trc_axes == "auto" else (job.trc_axes,)
         check_cameras_see_targets(cameras, targets_trc_m, sample_frames(targets_trc_m),
                                   [TRC_TO_MODEL[axes] for axes in conventions])
-        silhouettes = load_silhouettes(job, cameras, frame_count, not job.quiet)
+        silhouettes = load_silhouettes(job, cameras, frame_count, not job.quiet, videos.poses)
         if silhouettes_all_empty(silhouettes.frame, frame_count):
             warnings.warn(f"--{'masks' if job.masks is not None else 'videos'}: every silhouette is empty; "
                           "tracking without the image (as --no-image)", IbikWarning, stacklevel=2)
             use_image = False
             job = replace(job, settings=replace(job.settings, use_image=False))
     elif job.overlay and cameras and (job.masks is not None or job.videos is not None):
-        silhouettes = load_silhouettes(job, cameras, frame_count, not job.quiet)
+        silhouettes = load_silhouettes(job, cameras, frame_count, not job.quiet, videos.poses)
     # The cameras project model-frame points whatever the TRC's convention: only the targets turn.
     axes = choose_axes(job.trc_axes, names, targets_trc_m, cameras,
                        silhouettes.frame if silhouettes is not None else None)
     if not job.quiet:
         print(f"ibik: TRC axes: {axes.describe()}", file=sys.stderr)
     targets_m = axes.to_model(targets_trc_m)
-    body = prepare_body(job, names, targets_m)
+    body = prepare_body(job, names, targets_m)  # every keypoint scales the segments, tracked or not
+    silhouette_report = None
+    if silhouettes is not None:
+        if silhouettes.video_masks is not None:
+            restrict_to_subject(silhouettes.video_masks, cameras, targets_m)
+        silhouette_report = silhouette_quality(videos.segmenter, cameras, silhouettes.frame, targets_m)
+    tracked = [index for index, name in enumerate(names) if name not in videos.left_to_image]
 
     tracker = Tracker(body, cameras if use_image else [], job.settings)
     job = replace(job, settings=tracker.settings)  # as solved: a stack's image task may set the criterion
     with tqdm(total=frame_count, desc="tracking", unit="frame", disable=True if job.quiet else None) as bar:
-        result = tracker.track(names, targets_m, silhouettes.frame if use_image and silhouettes is not None else None,
+        result = tracker.track([names[index] for index in tracked], targets_m[:, tracked],
+                               silhouettes.frame if use_image and silhouettes is not None else None,
                                progress=bar.update)
 
-    return write_outputs(staging, job, trc, body, cameras, silhouettes, result, axes, outliers)
+    return write_outputs(staging, job, trc, body, cameras, silhouettes, result, axes, outliers[:, tracked],
+                         silhouette_report=silhouette_report, triangulation_report=videos.triangulation)
 
 
 def write_outputs(folder: Path, job: TrackJob, trc: TrcData, body: BodyModel, cameras: list,
                   silhouettes: Silhouettes | None, result: TrackingResult, axes: AxesChoice,
-                  outliers: np.ndarray | None = None) -> TrackingReport:
+                  outliers: np.ndarray | None = None, *, silhouette_report: SilhouetteQuality | None = None,
+                  triangulation_report: TriangulationReport | None = None) -> TrackingReport:
     """joints.trc (in the TRC's own axis convention), q.csv, motion.mot, motion.bvh, model.osim
     (model frame, Y up), report.json (and the overlays) into `folder`. `outliers`: (F, T) bool,
     the target values dropped as outliers, listed in report.json.
@@ -268,11 +307,12 @@ def write_outputs(folder: Path, job: TrackJob, trc: TrcData, body: BodyModel, ca
     write_q_csv(folder / "q.csv", body.model, times, result.q)
     write_model_mot(folder / "motion.mot", body.model, times, result.q)
     write_model_bvh(folder / "motion.bvh", body, result.q, 1.0 / frame_rate)
-    write_osim_model(folder / "model.osim", body, name=f"ibik_pin_{job.targets.stem}")
+    write_osim_model(folder / "model.osim", body, name=f"ibik_pin_{trc_stem(job)}")
     report = TrackingReport.from_tracking(
         result, job.settings, result.camera_names,
         trc.frame_numbers, times, frame_rate, axes, outliers,
     )
+    report.silhouettes, report.triangulation = silhouette_report, triangulation_report
     report.write(folder / "report.json")
     if job.overlay:
         write_overlays(folder, job, body, cameras, silhouettes, result, trc, frame_rate)
@@ -296,7 +336,7 @@ def write_overlays(folder: Path, job: TrackJob, body: BodyModel, cameras: list,
     segment_indices = [(result.keypoint_names.index(a), result.keypoint_names.index(b))
                        for a, b in body.segments]
     write_html_replay(folder / "replay.html", result.keypoint_names, segment_indices,
-                      result.keypoints, frame_rate, title=f"ibik_pin: {job.targets.name}")
+                      result.keypoints, frame_rate, title=f"ibik_pin: {trc_stem(job)}")
     starts = result.keypoints[:, [a for a, _ in segment_indices]]
     ends = result.keypoints[:, [b for _, b in segment_indices]]
     for index, camera in enumerate(cameras):

@@ -20,6 +20,7 @@ import numpy as np
 from ibik_pin.io.files import json_ready, strict_json, write_text_atomically
 from ibik_pin.tracking.axes import AXES_DESCRIPTIONS, AxesChoice
 from ibik_pin.tracking.tracker import TrackingResult, TrackingSettings
+from ibik_pin.tracking.video_inputs import SilhouetteQuality, TriangulationReport
 
 FRAME_NUMBERING = (
     "frame keys are the targets TRC's Frame# (the first row of a Pose2Sim/OpenSim TRC is frame 1); "
@@ -48,6 +49,12 @@ UNITS = {
     "trc_axes.inside_images": "0-1",
     "trc_axes.inside_silhouettes": "0-1",
     "trc_axes.upright_cosine": "-1 to 1",
+    "silhouettes": "null without silhouettes; otherwise the silhouettes.* entries",
+    "triangulation": "null when --targets were given; otherwise the triangulation.* entries",
+    "silhouettes.targets_inside_per_view": "0-1: per frame, the share of the projected targets inside the silhouette",
+    "silhouettes.mask_area_per_view": "px: per frame, the silhouette's area",
+    "triangulation.reprojection_median_m": "m: reprojection error at the point's depth, median over the frames",
+    "triangulation.landmarks_used_per_view": "0-1",
 }
 
 
@@ -229,6 +236,10 @@ class TrackingReport:
         inside_fraction_per_view: per camera, the fraction of the skeleton inside the silhouette
             at each frame [0-1] (None when the view was disabled).
         solve_seconds: wall time of the solves [s].
+        silhouettes: how well each camera's silhouettes hold the projected targets, and their
+            area over time (tracking.video_inputs.SilhouetteQuality); None without silhouettes.
+        triangulation: with --videos and no --targets, how the targets were triangulated
+            (tracking.video_inputs.TriangulationReport); None when they were given.
         units: :data:`UNITS`, written into the file so that it describes itself.
     """
 
@@ -257,6 +268,8 @@ class TrackingReport:
     frames_with_outlier_targets: dict[str, list[str]] = field(default_factory=dict)
     mean_iterations_per_frame: float | None = None
     step_tolerance: float | None = None
+    silhouettes: SilhouetteQuality | None = None
+    triangulation: TriangulationReport | None = None
     units: dict[str, str] = field(default_factory=lambda: dict(UNITS))
 
     @classmethod

@@ -19,8 +19,9 @@ from ibik_pin.vision.segmentation import silhouettes_from_video
 
 if TYPE_CHECKING:
     from ibik_pin.tracking.pipeline import TrackJob
+    from ibik_pin.vision.learned_pose import VideoPose
 
-__all__ = ["Silhouettes", "camera_folder_entries", "fit_to_size", "load_silhouettes"]
+__all__ = ["Silhouettes", "camera_folder_entries", "check_video_size", "fit_to_size", "load_silhouettes"]
 
 VIDEO_SUFFIXES = {".mp4", ".avi", ".mov", ".mkv", ".m4v"}
 # Encoders round frame sizes to macroblocks of 16 px: a video up to 15 px off its calibration's
@@ -95,8 +96,27 @@ def camera_folder_entries(folder: Path, names: list[str], kind: str) -> dict[str
     return found
 
 
-def load_silhouettes(job: TrackJob, cameras: list, frame_count: int, progress: bool) -> Silhouettes:
-    """Mask files or video silhouettes for every camera, checked against the targets' frame count."""
+def check_video_size(path: Path, camera) -> tuple[int, int]:
+    """The video's (width, height), refused when it is not the camera's calibrated size; a size
+    off by less than an encoder's alignment is accepted with a warning (masks are fitted to it)."""
+    with VideoReader(path) as reader:
+        video_size = (int(reader.size[0]), int(reader.size[1]))
+    size = tuple(camera.size)
+    if any(abs(a - b) >= CODEC_ALIGNMENT_PX for a, b in zip(video_size, size, strict=True)):
+        raise InputError(f"--videos {path}: frames are {video_size[0]} x "
+                         f"{video_size[1]} px but camera {camera.name!r} is {size[0]} x {size[1]} px")
+    if video_size != size:
+        warnings.warn(f"--videos {path}: frames are {video_size[0]} x {video_size[1]} px, "
+                      f"camera {camera.name!r} {size[0]} x {size[1]} px: silhouettes padded or cropped "
+                      "at the right and bottom (encoder alignment)", IbikWarning, stacklevel=2)
+    return video_size
+
+
+def load_silhouettes(job: TrackJob, cameras: list, frame_count: int, progress: bool,
+                     learned: list[VideoPose] | None = None) -> Silhouettes:
+    """Mask files or video silhouettes for every camera, checked against the targets' frame count.
+    `learned`: MediaPipe's detections of the videos (tracking.video_inputs), whose masks are used
+    instead of background subtraction."""
     names = [camera.name for camera in cameras]
     sizes = [tuple(camera.size) for camera in cameras]
     if job.masks is not None:
@@ -122,18 +142,14 @@ def load_silhouettes(job: TrackJob, cameras: list, frame_count: int, progress: b
     masks = []
     # disable=None draws the bar only when stderr is a terminal, so logs and pipes stay clean.
     with tqdm(total=len(names), desc="silhouettes", unit="camera", disable=None if progress else True) as bar:
-        for name, size in zip(names, sizes, strict=True):
-            with VideoReader(videos[name]) as reader:
-                video_size = tuple(reader.size)
-            if any(abs(a - b) >= CODEC_ALIGNMENT_PX for a, b in zip(video_size, size, strict=True)):
-                raise InputError(f"--videos {videos[name]}: frames are {video_size[0]} x "
-                                 f"{video_size[1]} px but camera {name!r} is {size[0]} x {size[1]} px")
-            camera_masks = silhouettes_from_video(videos[name], backgrounds[name] or None)
-            if video_size != size:
-                warnings.warn(f"--videos {videos[name]}: frames are {video_size[0]} x {video_size[1]} px, "
-                              f"camera {name!r} {size[0]} x {size[1]} px: silhouettes padded or cropped "
-                              "at the right and bottom (encoder alignment)", IbikWarning, stacklevel=2)
-                camera_masks = [fit_to_size(mask, size) for mask in camera_masks]
+        for index, (name, size) in enumerate(zip(names, sizes, strict=True)):
+            if learned is not None:
+                camera_masks = learned[index].masks
+            else:
+                video_size = check_video_size(videos[name], cameras[index])
+                camera_masks = silhouettes_from_video(videos[name], backgrounds[name] or None)
+                if video_size != size:
+                    camera_masks = [fit_to_size(mask, size) for mask in camera_masks]
             if len(camera_masks) != frame_count:
                 raise InputError(f"--videos {videos[name]}: {len(camera_masks)} frames but the targets "
                                  f"have {frame_count} frames")

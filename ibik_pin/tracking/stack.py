@@ -125,7 +125,12 @@ class Stack:
     def default(cls) -> Stack:
         """The stack `ibik track` uses without --stack (ibik_pin/data/default_stack.toml): 1 pelvis
         and legs, 2 the other targets (trunk, head, arms), 3 the image, 4 a light posture prior."""
-        with resources.as_file(resources.files("ibik_pin").joinpath("data").joinpath(DEFAULT_STACK_FILE)) as path:
+        return cls.packaged(DEFAULT_STACK_FILE)
+
+    @classmethod
+    def packaged(cls, file_name: str) -> Stack:
+        """A stack file shipped in ibik_pin/data."""
+        with resources.as_file(resources.files("ibik_pin").joinpath("data").joinpath(file_name)) as path:
             return cls.from_toml(path)
 
     @classmethod

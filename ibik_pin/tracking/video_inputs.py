@@ -1,0 +1,272 @@
+"""What `ibik track --videos` takes from the videos themselves: learned silhouettes of the subject,
+and, without --targets, the end effectors triangulated from the same detections.
+
+One MediaPipe Pose pass per camera (vision.learned_pose) gives both the person's segmentation and
+its 2D landmarks; the landmarks of all cameras triangulate into Pose2Sim's keypoints
+(vision.triangulation). A mask is then cut down to the subject: only the connected parts that hold
+a projected target (given or triangulated) are kept, so that a second person or a stray blob the
+other views deny never pulls the skeleton.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import cv2
+import numpy as np
+from tqdm import tqdm
+
+from ibik_pin.exceptions import IbikWarning, InputError
+from ibik_pin.io.trc import TrcData, write_trc
+from ibik_pin.io.video import VideoReader
+from ibik_pin.vision.learned_pose import MEDIAPIPE_INSTALL, VideoPose, detect_pose_in_video, learned_pose_available
+from ibik_pin.vision.triangulation import triangulate_landmarks
+
+if TYPE_CHECKING:
+    from ibik_pin.tracking.pipeline import TrackJob
+
+__all__ = ["LIMB_KEYPOINTS", "SEGMENTERS", "TRIANGULATED_TRC", "SilhouetteQuality", "TriangulationReport",
+           "VideoSources", "detect_videos", "keep_subject", "read_videos", "resolve_segmenter", "restrict_to_subject",
+           "silhouette_quality", "triangulated_trc"]
+
+SEGMENTERS = ("auto", "mediapipe", "mog2")
+# How far outside a mask a projected target may fall and still claim the part it touches [m]:
+# a keypoint sits inside its limb, so a few centimetres of calibration and detection error.
+SUBJECT_MARGIN_M = 0.05
+TRIANGULATED_TRC = "triangulated.trc"
+# Left to the image term when the targets are triangulated (the paper's split: IK places the end
+# effectors, the silhouettes the internal joints); --triangulated-limbs makes them low-priority targets.
+LIMB_KEYPOINTS = ("LElbow", "RElbow", "LKnee", "RKnee")
+LIMB_STACK_FILE = "limb_targets_stack.toml"
+
+
+@dataclass
+class VideoSources:
+    """What `ibik track` read from --videos before tracking.
+
+    Attributes:
+        job: the job, with `targets` the triangulated TRC when the videos gave them.
+        poses: MediaPipe's detections per camera, or None (MOG2, masks, no videos).
+        segmenter: "mediapipe", "mog2", "masks" (given by --masks) or "none".
+        triangulation: how the targets were triangulated, or None when they were given.
+        left_to_image: target keypoints not tracked (the limbs of a triangulated TRC).
+    """
+
+    job: TrackJob
+    poses: list[VideoPose] | None = None
+    segmenter: str = "none"
+    triangulation: TriangulationReport | None = None
+    left_to_image: tuple[str, ...] = ()
+
+
+def read_videos(staging: Path, job: TrackJob, cameras: Sequence) -> VideoSources:
+    """Run the videos' segmenter once; without --targets, triangulate the targets into
+    staging/TRIANGULATED_TRC and return the job that tracks them."""
+    from ibik_pin.tracking.silhouette_files import camera_folder_entries
+    from ibik_pin.tracking.stack import Stack
+
+    if job.masks is not None:
+        return VideoSources(job, segmenter="masks")
+    keypoints_needed = job.targets is None
+    if job.videos is None or not cameras or not (keypoints_needed or job.settings.use_image or job.overlay):
+        return VideoSources(job)
+    segmenter = resolve_segmenter(job.segmenter, keypoints_needed)
+    if segmenter == "mog2":
+        return VideoSources(job, segmenter=segmenter)
+    if job.background is not None:
+        warnings.warn("--background is used by --segmenter mog2 only; MediaPipe's silhouettes need none",
+                      IbikWarning, stacklevel=2)
+    if keypoints_needed and len(cameras) < 2:
+        raise InputError(f"without --targets the end effectors are triangulated: that needs two cameras or more, "
+                         f"found {len(cameras)}")
+    entries = camera_folder_entries(job.videos, [camera.name for camera in cameras], "videos")
+    poses = detect_videos(entries, cameras, not job.quiet)
+    if not keypoints_needed:
+        return VideoSources(job, poses, segmenter)
+    trc, figures = triangulated_trc(cameras, poses, video_frame_rate(entries[cameras[0].name]))
+    write_trc(staging / TRIANGULATED_TRC, trc)
+    left_out = () if job.triangulated_limbs else LIMB_KEYPOINTS
+    report = TriangulationReport(file=TRIANGULATED_TRC, keypoints=list(trc.marker_names),
+                                 tracked_keypoints=[name for name in trc.marker_names if name not in left_out],
+                                 **figures)
+    settings = replace(job.settings, stack=Stack.packaged(LIMB_STACK_FILE)) if job.triangulated_limbs else job.settings
+    job = replace(job, targets=staging / TRIANGULATED_TRC, trc_axes="y-up", settings=settings, triangulated_limbs=False)
+    return VideoSources(job, poses, segmenter, report, left_out)
+
+
+def restrict_to_subject(video_masks: list[list[np.ndarray]], cameras: Sequence, targets_m: np.ndarray) -> None:
+    """Cut every video mask down to the subject in place (keep_subject): the parts that hold one of
+    the frame's targets (F, T, 3), projected, within SUBJECT_MARGIN_M."""
+    for camera, masks in zip(cameras, video_masks, strict=True):
+        for frame, points in enumerate(targets_m):
+            present = points[np.isfinite(points).all(axis=1)]
+            if len(present):
+                masks[frame] = keep_subject(masks[frame], camera.project(present),
+                                            camera.pixel_radius(present, SUBJECT_MARGIN_M))
+
+
+def resolve_segmenter(requested: str, keypoints_needed: bool) -> str:
+    """The segmenter to run: "mediapipe" or "mog2".
+
+    "auto" takes MediaPipe where it is installed and otherwise falls back, with a warning that
+    gives the install command, to background subtraction. Triangulating the targets (no --targets)
+    needs MediaPipe's keypoints."""
+    if requested not in SEGMENTERS:
+        raise InputError(f"--segmenter: expected one of {', '.join(SEGMENTERS)}, found {requested!r}")
+    available = learned_pose_available()
+    if keypoints_needed and (requested == "mog2" or not available):
+        raise InputError("without --targets the end effectors are triangulated from MediaPipe Pose's keypoints"
+                         + (": install it with " + MEDIAPIPE_INSTALL if not available
+                            else "; --segmenter mog2 gives none"))
+    if requested == "mediapipe" and not available:
+        raise InputError(f"--segmenter mediapipe: MediaPipe is not installed ({MEDIAPIPE_INSTALL})")
+    if requested == "auto" and not available:
+        warnings.warn("silhouettes by background subtraction (MOG2), which loses a person who stands still; "
+                      f"for learned silhouettes: {MEDIAPIPE_INSTALL}", IbikWarning, stacklevel=2)
+        return "mog2"
+    return "mediapipe" if requested == "auto" else requested
+
+
+def detect_videos(videos: dict[str, Path], cameras: Sequence, progress: bool) -> list[VideoPose]:
+    """MediaPipe Pose on every camera's video, masks fitted to the calibrated size."""
+    from ibik_pin.tracking.silhouette_files import check_video_size, fit_to_size
+
+    poses = []
+    with tqdm(total=len(cameras), desc="pose and silhouettes", unit="camera",
+              disable=None if progress else True) as bar:
+        for camera in cameras:
+            path = videos[camera.name]
+            video_size = check_video_size(path, camera)
+            pose = detect_pose_in_video(path)
+            if video_size != tuple(camera.size):
+                pose.masks = [fit_to_size(mask, tuple(camera.size)) for mask in pose.masks]
+            poses.append(pose)
+            bar.update()
+    counts = {camera.name: len(pose.masks) for camera, pose in zip(cameras, poses, strict=True)}
+    if len(set(counts.values())) > 1:
+        raise InputError(f"--videos: the cameras' videos have different frame counts {counts}; "
+                         "they must be synchronised and of equal length")
+    return poses
+
+
+@dataclass
+class TriangulationReport:
+    """How the targets were triangulated from the videos (report.json's "triangulation").
+
+    Attributes:
+        file: the triangulated TRC written with the outputs.
+        keypoints: its keypoint names; tracked_keypoints: those used as targets.
+        frames_swapped_per_view: per camera, the frames whose left and right the detector had
+            exchanged (resolved across views).
+        landmarks_used_per_view: per camera, the share of landmarks it contributed [0-1].
+        reprojection_median_m: median over frames of the median reprojection error, at the
+            point's depth [m].
+    """
+
+    file: str
+    keypoints: list[str]
+    tracked_keypoints: list[str]
+    frames_swapped_per_view: dict[str, int]
+    landmarks_used_per_view: dict[str, float]
+    reprojection_median_m: float | None
+
+
+def triangulated_trc(cameras: Sequence, poses: Sequence[VideoPose], frame_rate: float) -> tuple[TrcData, dict]:
+    """Pose2Sim keypoints triangulated from the detections, as a TRC in metres (Y up, the frame the
+    cameras project), and the per-camera quality figures of TriangulationReport."""
+    keypoints, quality = triangulate_landmarks(cameras, np.array([pose.keypoints for pose in poses]),
+                                               np.array([pose.visibility for pose in poses]))
+    names = list(keypoints)
+    frames = len(poses[0].masks)
+    trc = TrcData(marker_names=names, times=np.arange(frames) / frame_rate,
+                  positions=np.stack([keypoints[name] for name in names], axis=1), units="m",
+                  data_rate=frame_rate, frame_numbers=np.arange(1, frames + 1))
+    errors = quality["reprojection_m"]
+    figures = {
+        "frames_swapped_per_view": {camera.name: int(quality["views_swapped"][:, index].sum())
+                                    for index, camera in enumerate(cameras)},
+        "landmarks_used_per_view": {camera.name: float(quality["views_used"][:, index].mean())
+                                    for index, camera in enumerate(cameras)},
+        "reprojection_median_m": float(np.nanmedian(errors)) if np.isfinite(errors).any() else None,
+    }
+    return trc, figures
+
+
+def video_frame_rate(path: Path) -> float:
+    """The frame rate the video announces [Hz]; InputError when it announces none."""
+    with VideoReader(path) as reader:
+        fps = reader.fps
+    if not np.isfinite(fps) or fps <= 0:
+        raise InputError(f"--videos {path}: the video announces no frame rate; give --targets instead")
+    return float(fps)
+
+
+def keep_subject(mask: np.ndarray, pixels: np.ndarray, radius_px: np.ndarray) -> np.ndarray:
+    """The parts of a mask (8-connected) that hold a target pixel or lie within its radius.
+
+    Args:
+        mask: (H, W) bool.
+        pixels: (N, 2) projected targets [px] (NaN rows ignored).
+        radius_px: (N,) how far outside a part each target may fall and still claim it [px].
+    """
+    count, labels = cv2.connectedComponents(mask.astype(np.uint8), connectivity=8)
+    if count <= 1:
+        return mask.astype(bool)
+    height, width = mask.shape
+    keep = np.zeros(count, bool)
+    for (u, v), radius in zip(pixels, radius_px, strict=True):
+        if not (np.isfinite(u) and np.isfinite(v) and np.isfinite(radius)):
+            continue
+        r = int(np.ceil(radius))
+        u0, u1 = max(int(round(u)) - r, 0), min(int(round(u)) + r + 1, width)
+        v0, v1 = max(int(round(v)) - r, 0), min(int(round(v)) + r + 1, height)
+        if u0 < u1 and v0 < v1:
+            keep[np.unique(labels[v0:v1, u0:u1])] = True
+    keep[0] = False
+    return keep[labels]
+
+
+@dataclass
+class SilhouetteQuality:
+    """How well each camera's silhouettes hold the subject (report.json's "silhouettes").
+
+    Attributes:
+        segmenter: "mediapipe", "mog2" or "masks" (given).
+        targets_inside_per_view: per camera, per frame, the share of the projected targets inside
+            the silhouette [0-1] (None in a frame without targets).
+        targets_inside_mean: per camera, its mean over frames.
+        mask_area_per_view: per camera, per frame, the silhouette's area [px].
+    """
+
+    segmenter: str
+    targets_inside_per_view: dict[str, list[float | None]] = field(default_factory=dict)
+    targets_inside_mean: dict[str, float | None] = field(default_factory=dict)
+    mask_area_per_view: dict[str, list[int]] = field(default_factory=dict)
+
+
+def silhouette_quality(segmenter: str, cameras: Sequence, masks_of_frame, targets_m: np.ndarray) -> SilhouetteQuality:
+    """SilhouetteQuality over the frames; `masks_of_frame(f)` gives frame f's masks, one per camera,
+    `targets_m` (F, T, 3) the targets in the frame the cameras project."""
+    quality = SilhouetteQuality(segmenter)
+    inside = np.full((len(targets_m), len(cameras)), np.nan)
+    areas = np.zeros((len(targets_m), len(cameras)), dtype=int)
+    for frame, points in enumerate(targets_m):
+        present = np.isfinite(points).all(axis=1)
+        for index, (camera, mask) in enumerate(zip(cameras, masks_of_frame(frame), strict=True)):
+            areas[frame, index] = int(np.count_nonzero(mask))
+            if present.any():
+                pixels = np.round(camera.project(points[present])).astype(int)
+                seen = camera.contains(pixels)
+                hits = np.zeros(len(pixels), bool)
+                hits[seen] = mask[pixels[seen, 1], pixels[seen, 0]]
+                inside[frame, index] = hits.mean()
+    for index, camera in enumerate(cameras):
+        column = inside[:, index]
+        quality.targets_inside_per_view[camera.name] = [None if np.isnan(v) else float(v) for v in column]
+        quality.targets_inside_mean[camera.name] = float(np.nanmean(column)) if np.isfinite(column).any() else None
+        quality.mask_area_per_view[camera.name] = [int(area) for area in areas[:, index]]
+    return quality
