@@ -1,0 +1,154 @@
+"""`ibik track --videos` on real video: a 10-frame, quarter-size excerpt of the Pose2Sim demo's four
+cameras (tests/data/pose2sim_video), compared with Pose2Sim's own triangulation of the same frames.
+
+MediaPipe runs for real here: these tests skip, with the install command, where it is not
+installed; CI installs it (.ci/run)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from ibik_pin.cli import main
+from ibik_pin.exceptions import InputError
+from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, read_calibration
+from ibik_pin.io.trc import read_trc
+from ibik_pin.tracking.pipeline import TrackJob
+from ibik_pin.tracking.video_inputs import read_videos, restrict_to_subject
+from ibik_pin.vision.camera import cameras_in_frame
+from ibik_pin.vision.learned_pose import MEDIAPIPE_INSTALL, detect_pose_in_video, learned_pose_available
+from tests.paths import TEST_DATA
+
+VIDEOS = TEST_DATA / "pose2sim_video"
+CALIBRATION = VIDEOS / "calibration.toml"
+FRAMES = 10
+# The keypoints the issue measures silhouettes with.
+MEASURED = ["RAnkle", "LAnkle", "RKnee", "LKnee", "RHip", "LHip", "RWrist", "LWrist", "RElbow", "LElbow",
+            "RShoulder", "LShoulder", "Head"]
+
+# cam01 and cam02 are 270 px wide, calibrated at 272 (the full-size videos: 1080 and 1088).
+pytestmark = pytest.mark.filterwarnings("ignore:.*encoder alignment")
+needs_mediapipe = pytest.mark.skipif(not learned_pose_available(), reason=f"MediaPipe not installed: {MEDIAPIPE_INSTALL}")
+
+
+@pytest.fixture(scope="module")
+def cameras():
+    return cameras_in_frame(read_calibration(CALIBRATION), POSE2SIM_TRC_TO_WORLD)
+
+
+@pytest.fixture(scope="module")
+def reference():
+    """Pose2Sim's triangulation of the excerpt's frames (Y up, metres)."""
+    trc = read_trc(TEST_DATA / "pose2sim_balancing_excerpt.trc")
+    return {name: trc.positions[:FRAMES, index] for index, name in enumerate(trc.marker_names)}
+
+
+@pytest.fixture(scope="module")
+def tracked(tmp_path_factory):
+    """`ibik track` on the excerpt's videos alone: no --targets."""
+    out = tmp_path_factory.mktemp("video") / "out"
+    code = main(["track", "--videos", str(VIDEOS), "--calibration", str(CALIBRATION), "--quiet", "--out", str(out)])
+    return code, out
+
+
+def inside_share(camera, masks, points_per_frame) -> float:
+    shares = []
+    for mask, points in zip(masks, points_per_frame, strict=True):
+        pixels = np.round(camera.project(points)).astype(int)
+        seen = camera.contains(pixels)
+        shares.append(np.mean(np.where(seen, mask[np.clip(pixels[:, 1], 0, mask.shape[0] - 1),
+                                                   np.clip(pixels[:, 0], 0, mask.shape[1] - 1)], False)))
+    return float(np.mean(shares))
+
+
+@needs_mediapipe
+def test_learned_silhouettes_hold_the_subject_and_nobody_else(cameras, reference, tmp_path):
+    job = TrackJob(targets=None, videos=VIDEOS, calibration=CALIBRATION, out=tmp_path / "out", quiet=True)
+    sources = read_videos(tmp_path, job, cameras)
+    assert sources.segmenter == "mediapipe" and sources.triangulation is not None
+    triangulated = read_trc(tmp_path / "triangulated.trc")
+    masks = [pose.masks for pose in sources.poses]
+    restrict_to_subject(masks, cameras, triangulated.positions)  # the subject from the videos, not the reference
+    measured = np.stack([reference[name] for name in MEASURED], axis=1)
+    shares = {camera.name: inside_share(camera, masks[index], measured) for index, camera in enumerate(cameras)}
+    # Measured: 0.98, 1.00, 0.84, 0.99. cam_03's calibration misplaces Pose2Sim's own points by about
+    # 25 px at full size (README, "From video"), which takes its limbs' edges out of the silhouette.
+    assert min(shares[name] for name in ("cam_01", "cam_02", "cam_04")) >= 0.9, shares
+    assert shares["cam_03"] >= 0.75, shares
+    for index, camera in enumerate(cameras):
+        pixels = np.concatenate([camera.project(points) for points in measured])
+        low, high = pixels.min(axis=0), pixels.max(axis=0)
+        margin = 0.15 * (high[1] - low[1])  # a hand's length around the body: nobody else fits in it
+        for mask in masks[index]:
+            rows, columns = np.nonzero(mask)
+            assert len(rows) > 0.02 * mask.size
+            assert columns.min() >= low[0] - margin and columns.max() <= high[0] + margin, camera.name
+            assert rows.min() >= low[1] - margin and rows.max() <= high[1] + margin, camera.name
+
+
+@needs_mediapipe
+def test_track_without_targets_triangulates_them_and_reports_the_silhouettes(tracked, reference):
+    code, out = tracked
+    assert code == 0
+    triangulated = read_trc(out / "triangulated.trc")
+    assert "LElbow" in triangulated.marker_names and "Head" in triangulated.marker_names
+    agreement = {name: float(np.median(np.linalg.norm(
+        triangulated.positions[:, triangulated.marker_names.index(name)] - reference[name], axis=1)))
+        for name in ("LWrist", "RWrist", "LAnkle", "RAnkle", "LHip", "RHip", "Head")}
+    # Measured on this excerpt: wrists 30-32 mm, ankles 26-36, hips 39 and 93, head 37 (the full video:
+    # README). BlazePose's hip landmarks sit lower than HALPE's, hence the wider hip bound.
+    assert max(agreement[name] for name in ("LWrist", "RWrist", "LAnkle", "RAnkle", "Head")) < 0.05, agreement
+    assert max(agreement["LHip"], agreement["RHip"]) < 0.12, agreement
+    report = json.loads((out / "report.json").read_text())
+    assert report["image"] is True
+    assert report["triangulation"]["file"] == "triangulated.trc"
+    assert not {"LElbow", "RElbow", "LKnee", "RKnee"} & set(report["triangulation"]["tracked_keypoints"])
+    assert not {"LElbow", "RElbow", "LKnee", "RKnee"} & set(report["keypoint_residual_m"])
+    silhouettes = report["silhouettes"]
+    assert silhouettes["segmenter"] == "mediapipe"
+    assert all(len(areas) == FRAMES and min(areas) > 0 for areas in silhouettes["mask_area_per_view"].values())
+    assert all(share > 0.8 for share in silhouettes["targets_inside_mean"].values()), silhouettes
+    joints = read_trc(out / "joints.trc")
+    for name in ("LElbow", "RElbow", "LKnee", "RKnee"):  # left to the image, yet near Pose2Sim's
+        error = np.median(np.linalg.norm(joints.positions[:, joints.marker_names.index(name)] - reference[name], axis=1))
+        assert error < 0.12, (name, error)
+
+
+@needs_mediapipe
+def test_triangulated_limbs_become_a_level_below_the_image(tmp_path):
+    out = tmp_path / "out"
+    assert main(["track", "--videos", str(VIDEOS), "--calibration", str(CALIBRATION), "--triangulated-limbs",
+                 "--iterations", "3", "--quiet", "--out", str(out)]) == 0
+    report = json.loads((out / "report.json").read_text())
+    levels = report["solver_levels"]["levels"]
+    assert levels.index("triangulated elbows and knees") == levels.index("image") + 1
+    assert {"LElbow", "RKnee"} <= set(report["keypoint_residual_m"])
+
+
+@needs_mediapipe
+def test_detection_finds_one_person_per_frame_of_each_camera():
+    pose = detect_pose_in_video(VIDEOS / "cam04.mp4", max_frames=4)
+    assert pose.keypoints.shape == (4, 33, 2) and np.isfinite(pose.keypoints).all()
+    assert len(pose.masks) == 4 and pose.masks[0].shape == (480, 272)
+    assert (pose.visibility[:, [11, 12, 23, 24]] > 0.5).all()  # shoulders and hips
+
+
+def test_without_targets_the_videos_and_the_calibration_are_needed(tmp_path):
+    with pytest.raises(InputError, match="--targets"):
+        TrackJob(targets=None, videos=VIDEOS, out=tmp_path / "out")
+    with pytest.raises(InputError, match="--triangulated-limbs"):
+        TrackJob(targets=TEST_DATA / "pose2sim_balancing_excerpt.trc", videos=VIDEOS, calibration=CALIBRATION,
+                 out=tmp_path / "out", triangulated_limbs=True)
+
+
+def test_mog2_gives_no_keypoints_to_triangulate(tmp_path, capsys):
+    videos = tmp_path / "videos"
+    shutil.copytree(VIDEOS, videos)
+    code = main(["track", "--videos", str(videos), "--calibration", str(CALIBRATION), "--segmenter", "mog2",
+                 "--quiet", "--out", str(tmp_path / "out")])
+    error = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(error) == 1 and "MediaPipe" in error[0]
+    assert not (tmp_path / "out").exists()
