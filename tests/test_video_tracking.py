@@ -31,7 +31,8 @@ MEASURED = ["RAnkle", "LAnkle", "RKnee", "LKnee", "RHip", "LHip", "RWrist", "LWr
 
 # cam01 and cam02 are 270 px wide, calibrated at 272 (the full-size videos: 1080 and 1088).
 pytestmark = pytest.mark.filterwarnings("ignore:.*encoder alignment")
-needs_mediapipe = pytest.mark.skipif(not learned_pose_available(), reason=f"MediaPipe not installed: {MEDIAPIPE_INSTALL}")
+needs_mediapipe = pytest.mark.skipif(not learned_pose_available(),
+                                     reason=f"MediaPipe not installed: {MEDIAPIPE_INSTALL}")
 
 
 @pytest.fixture(scope="module")
@@ -113,7 +114,8 @@ def test_track_without_targets_triangulates_them_and_reports_the_silhouettes(tra
     assert all(share > 0.8 for share in silhouettes["targets_inside_mean"].values()), silhouettes
     joints = read_trc(out / "joints.trc")
     for name in ("LElbow", "RElbow", "LKnee", "RKnee"):  # left to the image, yet near Pose2Sim's
-        error = np.median(np.linalg.norm(joints.positions[:, joints.marker_names.index(name)] - reference[name], axis=1))
+        estimate = joints.positions[:, joints.marker_names.index(name)]
+        error = np.median(np.linalg.norm(estimate - reference[name], axis=1))
         assert error < 0.12, (name, error)
 
 
