@@ -15,6 +15,7 @@ from tqdm import tqdm
 from ibik_pin.exceptions import FileFormatError, IbikWarning, InputError
 from ibik_pin.io.masks import IMAGE_SUFFIXES, list_mask_files, read_mask
 from ibik_pin.io.video import VideoReader
+from ibik_pin.vision.mask_store import CroppedMasks
 from ibik_pin.vision.segmentation import silhouettes_from_video
 
 if TYPE_CHECKING:
@@ -34,7 +35,7 @@ class Silhouettes:
     """Per camera, either mask files (read lazily) or decoded video silhouettes."""
 
     mask_files: list[list[Path]] | None
-    video_masks: list[list[np.ndarray]] | None
+    video_masks: list[CroppedMasks] | None
     sizes: list[tuple[int, int]]
 
     @property
@@ -149,7 +150,7 @@ def load_silhouettes(job: TrackJob, cameras: list, frame_count: int, progress: b
                 video_size = check_video_size(videos[name], cameras[index])
                 camera_masks = silhouettes_from_video(videos[name], backgrounds[name] or None)
                 if video_size != size:
-                    camera_masks = [fit_to_size(mask, size) for mask in camera_masks]
+                    camera_masks = camera_masks.fitted(size)
             if len(camera_masks) != frame_count:
                 raise InputError(f"--videos {videos[name]}: {len(camera_masks)} frames but the targets "
                                  f"have {frame_count} frames")

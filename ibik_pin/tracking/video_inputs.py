@@ -24,6 +24,7 @@ from ibik_pin.exceptions import IbikWarning, InputError
 from ibik_pin.io.trc import TrcData, write_trc
 from ibik_pin.io.video import VideoReader
 from ibik_pin.vision.learned_pose import MEDIAPIPE_INSTALL, VideoPose, detect_pose_in_video, learned_pose_available
+from ibik_pin.vision.mask_store import CroppedMasks
 from ibik_pin.vision.triangulation import triangulate_landmarks
 
 if TYPE_CHECKING:
@@ -98,7 +99,7 @@ def read_videos(staging: Path, job: TrackJob, cameras: Sequence) -> VideoSources
     return VideoSources(job, poses, segmenter, report, left_out)
 
 
-def restrict_to_subject(video_masks: list[list[np.ndarray]], cameras: Sequence, targets_m: np.ndarray) -> None:
+def restrict_to_subject(video_masks: Sequence[CroppedMasks], cameras: Sequence, targets_m: np.ndarray) -> None:
     """Cut every video mask down to the subject in place (keep_subject): the parts that hold one of
     the frame's targets (F, T, 3), projected, within SUBJECT_MARGIN_M."""
     for camera, masks in zip(cameras, video_masks, strict=True):
@@ -133,7 +134,7 @@ def resolve_segmenter(requested: str, keypoints_needed: bool) -> str:
 
 def detect_videos(videos: dict[str, Path], cameras: Sequence, progress: bool) -> list[VideoPose]:
     """MediaPipe Pose on every camera's video, masks fitted to the calibrated size."""
-    from ibik_pin.tracking.silhouette_files import check_video_size, fit_to_size
+    from ibik_pin.tracking.silhouette_files import check_video_size
 
     poses = []
     with tqdm(total=len(cameras), desc="pose and silhouettes", unit="camera",
@@ -143,7 +144,7 @@ def detect_videos(videos: dict[str, Path], cameras: Sequence, progress: bool) ->
             video_size = check_video_size(path, camera)
             pose = detect_pose_in_video(path)
             if video_size != tuple(camera.size):
-                pose.masks = [fit_to_size(mask, tuple(camera.size)) for mask in pose.masks]
+                pose.masks = pose.masks.fitted(tuple(camera.size))
             poses.append(pose)
             bar.update()
     counts = {camera.name: len(pose.masks) for camera, pose in zip(cameras, poses, strict=True)}

@@ -23,6 +23,7 @@ from ibik_pin.exceptions import FileFormatError, InputError
 from ibik_pin.io.files import PathLike
 from ibik_pin.io.native_output import captured_native_stderr
 from ibik_pin.io.video import read_frames
+from ibik_pin.vision.mask_store import CroppedMasks
 
 __all__ = ["LANDMARKS", "MEDIAPIPE_INSTALL", "VideoPose", "detect_pose_in_video", "learned_pose_available"]
 
@@ -56,7 +57,7 @@ class VideoPose:
 
     keypoints: np.ndarray
     visibility: np.ndarray
-    masks: list[np.ndarray]
+    masks: CroppedMasks
 
 
 def _solution(model_complexity: int):
@@ -90,10 +91,12 @@ def detect_pose_in_video(path: PathLike, *, max_frames: int | None = None, mask_
     """
     if not 0.0 < mask_threshold < 1.0:
         raise InputError(f"mask_threshold: expected a probability in (0, 1), found {mask_threshold!r}")
-    keypoints, visibility, masks = [], [], []
+    keypoints, visibility = [], []
+    masks: CroppedMasks | None = None
     with _solution(model_complexity) as pose, captured_native_stderr():
         for frame in read_frames(path, max_frames):
             height, width = frame.shape[:2]
+            masks = masks if masks is not None else CroppedMasks((width, height))
             found = pose.process(cv2.cvtColor(frame, cv2.COLOR_BGR2RGB))
             if found.pose_landmarks is None:
                 keypoints.append(np.full((len(LANDMARKS), 2), np.nan))
@@ -105,6 +108,6 @@ def detect_pose_in_video(path: PathLike, *, max_frames: int | None = None, mask_
             probability = found.segmentation_mask
             masks.append(probability > mask_threshold if probability is not None
                          else np.zeros((height, width), bool))
-    if not masks:
+    if masks is None:
         raise FileFormatError(f"video file '{Path(path)}': expected frames, found none")
     return VideoPose(np.array(keypoints), np.array(visibility), masks)

@@ -19,6 +19,7 @@ from ibik_pin.exceptions import FileFormatError, InputError
 from ibik_pin.io.files import PathLike
 from ibik_pin.io.masks import IMAGE_SUFFIXES, read_image
 from ibik_pin.io.video import VideoReader, read_frames
+from ibik_pin.vision.mask_store import CroppedMasks
 
 __all__ = ["TemporalMajority", "silhouettes_from_video"]
 
@@ -103,7 +104,7 @@ def silhouettes_from_video(
     close_px: int = 7,
     max_components: int = 3,
     min_component_fraction: float = 0.1,
-) -> list[np.ndarray]:
+) -> CroppedMasks:
     """Silhouettes of the moving person in a video, by OpenCV background subtraction (MOG2).
 
     With ``background_paths`` (images or videos of the empty scene, same size as the video),
@@ -138,7 +139,7 @@ def silhouettes_from_video(
         min_component_fraction: smallest kept component, as a fraction of the largest's area.
 
     Returns:
-        One (H, W) bool mask per frame, True = person.
+        One (H, W) bool mask per frame, True = person (kept as bounding-box crops).
 
     Raises:
         FileFormatError: the video or a background file cannot be read.
@@ -189,7 +190,7 @@ def silhouettes_from_video(
 
     open_kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (open_px, open_px)) if open_px > 0 else None
     close_kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (close_px, close_px)) if close_px > 0 else None
-    masks = []
+    masks = CroppedMasks(size)
     for frame in read_frames(video_path, max_frames):
         mask = (subtractor.apply(frame, learningRate=0.0) == 255).astype(np.uint8)  # 127 = shadow
         if open_kernel is not None:
@@ -197,6 +198,6 @@ def silhouettes_from_video(
         if close_kernel is not None:
             mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, close_kernel)
         masks.append(_keep_largest_components(mask, int(max_components), float(min_component_fraction)))
-    if not masks:
+    if not len(masks):
         raise FileFormatError(f"video file '{video_path}': expected frames, found none")
     return masks
