@@ -7,8 +7,10 @@ installed; CI installs it (.ci/run)."""
 from __future__ import annotations
 
 import json
+import re
 import shutil
 
+import cv2
 import numpy as np
 import pytest
 
@@ -16,6 +18,7 @@ from ibik_pin.cli import main
 from ibik_pin.exceptions import InputError
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, read_calibration
 from ibik_pin.io.trc import read_trc
+from ibik_pin.io.video import read_frames
 from ibik_pin.tracking.pipeline import TrackJob
 from ibik_pin.tracking.video_inputs import read_videos, restrict_to_subject
 from ibik_pin.vision.camera import cameras_in_frame
@@ -53,6 +56,14 @@ def tracked(tmp_path_factory):
     out = tmp_path_factory.mktemp("video") / "out"
     code = main(["track", "--videos", str(VIDEOS), "--calibration", str(CALIBRATION), "--quiet", "--out", str(out)])
     return code, out
+
+
+def exit_code(arguments: list[str]) -> int:
+    """main's exit code, also where argparse exits (a bad option)."""
+    try:
+        return main(arguments)
+    except SystemExit as exit:
+        return int(exit.code or 0)
 
 
 def inside_share(camera, masks, points_per_frame) -> float:
@@ -154,3 +165,40 @@ def test_mog2_gives_no_keypoints_to_triangulate(tmp_path, capsys):
     error = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(error) == 1 and "MediaPipe" in error[0]
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(("extra", "pattern"), [
+    (["--segmenter", "best"], r"--segmenter: invalid choice"),
+    (["--targets", str(TEST_DATA / "pose2sim_balancing_excerpt.trc"), "--triangulated-limbs"],
+     r"--triangulated-limbs goes with --videos without --targets"),
+    (["--cameras", "cam_01"], r"needs two cameras or more|MediaPipe"),
+])
+def test_video_options_misused_are_refused_in_one_line(tmp_path, capsys, extra, pattern):
+    code = exit_code(["track", "--videos", str(VIDEOS), "--calibration", str(CALIBRATION), "--quiet",
+                 "--out", str(tmp_path / "out"), *extra])
+    error = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(error) == 1, error
+    assert re.search(pattern, error[0]), error[0]
+    assert not (tmp_path / "out").exists()
+
+
+def test_without_targets_or_videos_nothing_to_track_is_refused(tmp_path, capsys):
+    code = main(["track", "--calibration", str(CALIBRATION), "--quiet", "--out", str(tmp_path / "out")])
+    error = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(error) == 1 and "--targets" in error[0]
+
+
+@needs_mediapipe
+def test_videos_of_different_lengths_are_refused(tmp_path, capsys):
+    videos = tmp_path / "videos"
+    shutil.copytree(VIDEOS, videos)
+    frames = list(read_frames(VIDEOS / "cam02.mp4"))[:6]
+    writer = cv2.VideoWriter(str(videos / "cam02.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), 60.0,
+                             (frames[0].shape[1], frames[0].shape[0]))
+    for frame in frames:
+        writer.write(frame)
+    writer.release()
+    code = main(["track", "--videos", str(videos), "--calibration", str(CALIBRATION), "--quiet",
+                 "--out", str(tmp_path / "out")])
+    error = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(error) == 1 and "different frame counts" in error[0], error
