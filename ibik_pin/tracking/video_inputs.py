@@ -136,17 +136,20 @@ def detect_videos(videos: dict[str, Path], cameras: Sequence, progress: bool) ->
     """MediaPipe Pose on every camera's video, masks fitted to the calibrated size."""
     from ibik_pin.tracking.silhouette_files import check_video_size
 
+    sizes = {camera.name: check_video_size(videos[camera.name], camera) for camera in cameras}
+    frames = 0
+    for camera in cameras:
+        with VideoReader(videos[camera.name]) as reader:
+            frames += max(reader.frame_count, 0)
     poses = []
-    with tqdm(total=len(cameras), desc="pose and silhouettes", unit="camera",
+    # disable=None draws the bar only when stderr is a terminal, so logs and pipes stay clean.
+    with tqdm(total=frames or None, desc="pose and silhouettes", unit="frame",
               disable=None if progress else True) as bar:
         for camera in cameras:
-            path = videos[camera.name]
-            video_size = check_video_size(path, camera)
-            pose = detect_pose_in_video(path)
-            if video_size != tuple(camera.size):
+            pose = detect_pose_in_video(videos[camera.name], progress=bar.update)
+            if sizes[camera.name] != tuple(camera.size):
                 pose.masks = pose.masks.fitted(tuple(camera.size))
             poses.append(pose)
-            bar.update()
     counts = {camera.name: len(pose.masks) for camera, pose in zip(cameras, poses, strict=True)}
     if len(set(counts.values())) > 1:
         raise InputError(f"--videos: the cameras' videos have different frame counts {counts}; "

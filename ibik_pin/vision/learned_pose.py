@@ -12,6 +12,7 @@ with numpy 2; tests/test_learned_pose.py runs it wherever it is installed).
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import util
 from pathlib import Path
@@ -74,7 +75,7 @@ def _solution(model_complexity: int):
 
 
 def detect_pose_in_video(path: PathLike, *, max_frames: int | None = None, mask_threshold: float = 0.5,
-                         model_complexity: int = 1) -> VideoPose:
+                         model_complexity: int = 1, progress: Callable[[int], object] | None = None) -> VideoPose:
     """MediaPipe Pose's landmarks and person segmentation in every frame of a video.
 
     Args:
@@ -83,6 +84,7 @@ def detect_pose_in_video(path: PathLike, *, max_frames: int | None = None, mask_
         mask_threshold: segmentation probability above which a pixel is the person.
         model_complexity: 1 (BlazePose full, the default) is the model the 0.10.21 wheel ships;
             0 and 2 are downloaded on first use.
+        progress: called with 1 after each frame (a progress bar's update).
 
     Raises:
         InputError: MediaPipe is not installed (the message gives the install command), or
@@ -108,6 +110,8 @@ def detect_pose_in_video(path: PathLike, *, max_frames: int | None = None, mask_
             probability = found.segmentation_mask
             masks.append(probability > mask_threshold if probability is not None
                          else np.zeros((height, width), bool))
+            if progress is not None:
+                progress(1)
     if masks is None:
         raise FileFormatError(f"video file '{Path(path)}': expected frames, found none")
     return VideoPose(np.array(keypoints), np.array(visibility), masks)
