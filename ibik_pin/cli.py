@@ -55,6 +55,11 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--triangulated-limbs", action="store_true",
                         help="without --targets: the triangulated elbows and knees become targets below the "
                              "image (default: left to the image)")
+    parser.add_argument("--refit-cameras",
+                        help="comma-separated cameras that slipped since the calibration: each is turned to meet "
+                             "the other views' triangulated keypoints (with --videos, MediaPipe and three cameras "
+                             "or more; report.json's extrinsics shows each camera's disagreement; the cameras are "
+                             "written to calibration_refitted.toml)")
     parser.add_argument("--cameras", help="comma-separated subset of the calibration's cameras")
     parser.add_argument("--model", help="URDF of the human (default: example-robot-data's)")
     parser.add_argument("--method", choices=sorted(SOLVERS), default="qp",
@@ -121,6 +126,8 @@ def _job(arguments: argparse.Namespace) -> TrackJob:
         trc_axes=arguments.trc_axes,
         segmenter=arguments.segmenter,
         triangulated_limbs=arguments.triangulated_limbs,
+        refit_cameras=None if arguments.refit_cameras is None
+        else [name.strip() for name in arguments.refit_cameras.split(",")],
     )
 
 

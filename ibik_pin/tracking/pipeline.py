@@ -52,6 +52,7 @@ from ibik_pin.tracking.video_inputs import (
     silhouette_quality,
 )
 from ibik_pin.vision.camera import cameras_in_frame, select_cameras
+from ibik_pin.vision.extrinsics_refit import ExtrinsicsRefit
 from ibik_pin.viz.overlay import write_overlay_video
 from ibik_pin.viz.plots import Panel, plot_panels
 from ibik_pin.viz.replay import write_html_replay
@@ -100,6 +101,7 @@ class TrackJob:
     trc_axes: str = "auto"
     segmenter: str = "auto"
     triangulated_limbs: bool = False
+    refit_cameras: list[str] | None = None
 
     def __post_init__(self) -> None:
         """Paths given as str become Paths; what the CLI refuses, the API refuses too (InputError)."""
@@ -228,7 +230,7 @@ def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
             cameras = select_cameras(cameras, job.cameras)
     # Without --targets the videos' keypoints are triangulated into staging and read back as targets.
     videos = read_videos(staging, job, cameras)
-    job = videos.job
+    job, cameras = videos.job, videos.cameras
     if job.targets is None:  # TrackJob refuses this unless the videos give the targets
         raise InputError("--targets: expected a TRC, or --videos and --calibration to triangulate one")
     trc, targets_trc_m, outliers = _trc_in_metres("--targets", job.targets)
@@ -277,13 +279,15 @@ def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
                                progress=bar.update)
 
     return write_outputs(staging, job, trc, body, cameras, silhouettes, result, axes, outliers[:, tracked],
-                         silhouette_report=silhouette_report, triangulation_report=videos.triangulation)
+                         silhouette_report=silhouette_report, triangulation_report=videos.triangulation,
+                         extrinsics=videos.extrinsics)
 
 
 def write_outputs(folder: Path, job: TrackJob, trc: TrcData, body: BodyModel, cameras: list,
                   silhouettes: Silhouettes | None, result: TrackingResult, axes: AxesChoice,
                   outliers: np.ndarray | None = None, *, silhouette_report: SilhouetteQuality | None = None,
-                  triangulation_report: TriangulationReport | None = None) -> TrackingReport:
+                  triangulation_report: TriangulationReport | None = None,
+                  extrinsics: ExtrinsicsRefit | None = None) -> TrackingReport:
     """joints.trc (in the TRC's own axis convention), q.csv, motion.mot, motion.bvh, model.osim
     (model frame, Y up), report.json (and the overlays) into `folder`. `outliers`: (F, T) bool,
     the target values dropped as outliers, listed in report.json.
@@ -312,7 +316,7 @@ def write_outputs(folder: Path, job: TrackJob, trc: TrcData, body: BodyModel, ca
         result, job.settings, result.camera_names,
         trc.frame_numbers, times, frame_rate, axes, outliers,
     )
-    report.silhouettes, report.triangulation = silhouette_report, triangulation_report
+    report.silhouettes, report.triangulation, report.extrinsics = silhouette_report, triangulation_report, extrinsics
     report.write(folder / "report.json")
     if job.overlay:
         write_overlays(folder, job, body, cameras, silhouettes, result, trc, frame_rate)

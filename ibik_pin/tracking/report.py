@@ -21,6 +21,7 @@ from ibik_pin.io.files import json_ready, strict_json, write_text_atomically
 from ibik_pin.tracking.axes import AXES_DESCRIPTIONS, AxesChoice
 from ibik_pin.tracking.tracker import TrackingResult, TrackingSettings
 from ibik_pin.tracking.video_inputs import SilhouetteQuality, TriangulationReport
+from ibik_pin.vision.extrinsics_refit import ExtrinsicsRefit
 
 FRAME_NUMBERING = (
     "frame keys are the targets TRC's Frame# (the first row of a Pose2Sim/OpenSim TRC is frame 1); "
@@ -55,6 +56,11 @@ UNITS = {
     "silhouettes.mask_area_per_view": "px: per frame, the silhouette's area",
     "triangulation.reprojection_median_m": "m: reprojection error at the point's depth, median over the frames",
     "triangulation.landmarks_used_per_view": "0-1",
+    "extrinsics": ("null unless MediaPipe's landmarks from three cameras or more were checked against each other; "
+                   "the cameras turned by --refit-cameras are written to calibration_refitted.toml"),
+    "extrinsics.reprojection_px": ("px: per camera, median distance from its detections to the landmarks the other "
+                                   "views triangulate, projected, as calibrated; reprojection_after_px: re-fitted"),
+    "extrinsics.turn_deg": "deg: how far each re-fitted camera turned about its centre",
 }
 
 
@@ -240,6 +246,8 @@ class TrackingReport:
             area over time (tracking.video_inputs.SilhouetteQuality); None without silhouettes.
         triangulation: with --videos and no --targets, how the targets were triangulated
             (tracking.video_inputs.TriangulationReport); None when they were given.
+        extrinsics: the check of the cameras' poses against each other's detections, and the
+            re-fitted ones (vision.extrinsics_refit.ExtrinsicsRefit); None when it did not run.
         units: :data:`UNITS`, written into the file so that it describes itself.
     """
 
@@ -270,6 +278,7 @@ class TrackingReport:
     step_tolerance: float | None = None
     silhouettes: SilhouetteQuality | None = None
     triangulation: TriangulationReport | None = None
+    extrinsics: ExtrinsicsRefit | None = None
     units: dict[str, str] = field(default_factory=lambda: dict(UNITS))
 
     @classmethod

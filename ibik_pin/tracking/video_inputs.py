@@ -21,18 +21,20 @@ import numpy as np
 from tqdm import tqdm
 
 from ibik_pin.exceptions import IbikWarning, InputError
+from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, write_calibration
 from ibik_pin.io.trc import TrcData, write_trc
 from ibik_pin.io.video import VideoReader
+from ibik_pin.vision.extrinsics_refit import ExtrinsicsRefit, in_calibration_world, refit_extrinsics
 from ibik_pin.vision.learned_pose import MEDIAPIPE_INSTALL, VideoPose, detect_pose_in_video, learned_pose_available
 from ibik_pin.vision.mask_store import CroppedMasks
-from ibik_pin.vision.triangulation import triangulate_landmarks
+from ibik_pin.vision.triangulation import labelled_landmarks, triangulate_landmarks
 
 if TYPE_CHECKING:
     from ibik_pin.tracking.pipeline import TrackJob
 
-__all__ = ["LIMB_KEYPOINTS", "SEGMENTERS", "TRIANGULATED_TRC", "SilhouetteQuality", "TriangulationReport",
-           "VideoSources", "detect_videos", "keep_subject", "read_videos", "resolve_segmenter", "restrict_to_subject",
-           "silhouette_quality", "triangulated_trc"]
+__all__ = ["LIMB_KEYPOINTS", "REFITTED_CALIBRATION", "SEGMENTERS", "TRIANGULATED_TRC", "SilhouetteQuality",
+           "TriangulationReport", "VideoSources", "detect_videos", "keep_subject", "read_videos", "refitted_cameras",
+           "resolve_segmenter", "restrict_to_subject", "silhouette_quality", "triangulated_trc"]
 
 SEGMENTERS = ("auto", "mediapipe", "mog2")
 # How far outside a mask a projected target may fall and still claim the part it touches [m]:
@@ -43,6 +45,9 @@ TRIANGULATED_TRC = "triangulated.trc"
 # effectors, the silhouettes the internal joints); --triangulated-limbs makes them low-priority targets.
 LIMB_KEYPOINTS = ("LElbow", "RElbow", "LKnee", "RKnee")
 LIMB_STACK_FILE = "limb_targets_stack.toml"
+REFITTED_CALIBRATION = "calibration_refitted.toml"
+# The extrinsics re-fit uses only the landmarks the detector is sure of.
+REFIT_MIN_VISIBILITY = 0.5
 
 
 @dataclass
@@ -51,33 +56,49 @@ class VideoSources:
 
     Attributes:
         job: the job, with `targets` the triangulated TRC when the videos gave them.
+        cameras: the cameras to track with: as calibrated, or with re-fitted poses (extrinsics).
         poses: MediaPipe's detections per camera, or None (MOG2, masks, no videos).
         segmenter: "mediapipe", "mog2", "masks" (given by --masks) or "none".
         triangulation: how the targets were triangulated, or None when they were given.
         left_to_image: target keypoints not tracked (the limbs of a triangulated TRC).
+        extrinsics: what the re-fit of the cameras' poses found, or None when it did not run.
     """
 
     job: TrackJob
+    cameras: list
     poses: list[VideoPose] | None = None
     segmenter: str = "none"
     triangulation: TriangulationReport | None = None
     left_to_image: tuple[str, ...] = ()
+    extrinsics: ExtrinsicsRefit | None = None
 
 
 def read_videos(staging: Path, job: TrackJob, cameras: Sequence) -> VideoSources:
-    """Run the videos' segmenter once; without --targets, triangulate the targets into
+    """Run the videos' segmenter once; with MediaPipe's landmarks and three cameras or more, measure
+    each camera's disagreement with the others and turn those of --refit-cameras (written to
+    staging/REFITTED_CALIBRATION); without --targets, triangulate the targets into
     staging/TRIANGULATED_TRC and return the job that tracks them."""
     from ibik_pin.tracking.silhouette_files import camera_folder_entries
     from ibik_pin.tracking.stack import Stack
 
+    cameras = list(cameras)
+    if job.refit_cameras is not None and (job.videos is None or len(cameras) < 3 or job.segmenter == "mog2"
+                                          or not learned_pose_available()):
+        raise InputError("--refit-cameras: needs --videos, --calibration with three cameras or more, and "
+                         f"MediaPipe's keypoints (--segmenter mediapipe or auto, the video extra: {MEDIAPIPE_INSTALL})")
+    unknown = sorted(set(job.refit_cameras or ()) - {camera.name for camera in cameras})
+    if unknown:
+        raise InputError(f"--refit-cameras: {', '.join(unknown)} not among the cameras "
+                         f"{', '.join(camera.name for camera in cameras)}")
     if job.masks is not None:
-        return VideoSources(job, segmenter="masks")
+        return VideoSources(job, cameras, segmenter="masks")
     keypoints_needed = job.targets is None
-    if job.videos is None or not cameras or not (keypoints_needed or job.settings.use_image or job.overlay):
-        return VideoSources(job)
+    wanted = keypoints_needed or job.settings.use_image or job.overlay or job.refit_cameras
+    if job.videos is None or not cameras or not wanted:
+        return VideoSources(job, cameras)
     segmenter = resolve_segmenter(job.segmenter, keypoints_needed)
     if segmenter == "mog2":
-        return VideoSources(job, segmenter=segmenter)
+        return VideoSources(job, cameras, segmenter=segmenter)
     if job.background is not None:
         warnings.warn("--background is used by --segmenter mog2 only; MediaPipe's silhouettes need none",
                       IbikWarning, stacklevel=2)
@@ -86,8 +107,13 @@ def read_videos(staging: Path, job: TrackJob, cameras: Sequence) -> VideoSources
                          f"found {len(cameras)}")
     entries = camera_folder_entries(job.videos, [camera.name for camera in cameras], "videos")
     poses = detect_videos(entries, cameras, not job.quiet)
+    extrinsics = None
+    if len(cameras) >= 3:
+        cameras, extrinsics = refitted_cameras(cameras, poses, job.refit_cameras or ())
+        if extrinsics.refitted:
+            write_calibration(staging / REFITTED_CALIBRATION, in_calibration_world(cameras, POSE2SIM_TRC_TO_WORLD))
     if not keypoints_needed:
-        return VideoSources(job, poses, segmenter)
+        return VideoSources(job, cameras, poses, segmenter, extrinsics=extrinsics)
     trc, figures = triangulated_trc(cameras, poses, video_frame_rate(entries[cameras[0].name]))
     write_trc(staging / TRIANGULATED_TRC, trc)
     left_out = () if job.triangulated_limbs else LIMB_KEYPOINTS
@@ -96,7 +122,21 @@ def read_videos(staging: Path, job: TrackJob, cameras: Sequence) -> VideoSources
                                  **figures)
     settings = replace(job.settings, stack=Stack.packaged(LIMB_STACK_FILE)) if job.triangulated_limbs else job.settings
     job = replace(job, targets=staging / TRIANGULATED_TRC, trc_axes="y-up", settings=settings, triangulated_limbs=False)
-    return VideoSources(job, poses, segmenter, report, left_out)
+    return VideoSources(job, cameras, poses, segmenter, report, left_out, extrinsics)
+
+
+def refitted_cameras(cameras: Sequence, poses: Sequence[VideoPose],
+                     refit: Sequence[str]) -> tuple[list, ExtrinsicsRefit]:
+    """Each camera's disagreement with the others, and the cameras with those named in `refit`
+    turned to meet them (vision.extrinsics_refit), from the detections with left and right agreed
+    across views."""
+    landmarks = np.array([pose.keypoints for pose in poses])
+    visibility = np.array([pose.visibility for pose in poses])
+    _, quality = triangulate_landmarks(cameras, landmarks, visibility)
+    swapped = quality["views_swapped"]
+    confidence = labelled_landmarks(visibility[..., None], swapped)[..., 0]
+    return refit_extrinsics(cameras, labelled_landmarks(landmarks, swapped),
+                            np.where(confidence >= REFIT_MIN_VISIBILITY, confidence, 0.0), refit)
 
 
 def restrict_to_subject(video_masks: Sequence[CroppedMasks], cameras: Sequence, targets_m: np.ndarray) -> None:

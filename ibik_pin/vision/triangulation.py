@@ -30,7 +30,8 @@ from ibik_pin.exceptions import InputError
 from ibik_pin.vision.learned_pose import LANDMARKS
 from ibik_pin.vision.pinhole import PinholeCamera
 
-__all__ = ["POSE2SIM_FROM_LANDMARKS", "Triangulation", "head_top", "triangulate", "triangulate_landmarks"]
+__all__ = ["POSE2SIM_FROM_LANDMARKS", "Triangulation", "head_top", "labelled_landmarks", "triangulate",
+           "triangulate_landmarks"]
 
 # Pose2Sim (HALPE_26) keypoint -> the BlazePose landmark it is read from.
 POSE2SIM_FROM_LANDMARKS = {
@@ -55,6 +56,15 @@ def _swap_sides(landmarks: np.ndarray) -> np.ndarray:
     swapped = landmarks.copy()
     swapped[..., _LEFT, :], swapped[..., _RIGHT, :] = landmarks[..., _RIGHT, :], landmarks[..., _LEFT, :]
     return swapped
+
+
+def labelled_landmarks(landmarks: np.ndarray, swapped: np.ndarray) -> np.ndarray:
+    """Landmarks (V, F, 33, k) with each view's left and right exchanged where `swapped` (F, V)
+    says (triangulate_landmarks' "views_swapped"): every view then names the same side alike."""
+    labelled = np.array(landmarks, dtype=np.float64, copy=True)
+    views, frames = np.nonzero(np.asarray(swapped).T)
+    labelled[views, frames] = _swap_sides(labelled[views, frames])
+    return labelled
 
 
 def _projection_rows(cameras: Sequence[PinholeCamera], pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
