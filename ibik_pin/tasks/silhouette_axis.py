@@ -170,23 +170,35 @@ def _axis_value_and_pixel_gradient(
         The view's h_axis [px] and dh/d end_pixels, shape (K, 2).
     """
     starts, ends = end_pixels[start_index], end_pixels[end_index]  # (S, 2)
-    along = ends - starts
-    length_squared = np.maximum(np.einsum("si,si->s", along, along), 1e-12)
-    offsets = samples[:, None, :] - starts[None, :, :]  # (N, S, 2)
-    s = np.clip(np.einsum("nsi,si->ns", offsets, along) / length_squared, 0.0, 1.0)
-    residuals = offsets - s[:, :, None] * along[None, :, :]  # sample minus closest point
-    distance_squared = np.einsum("nsi,nsi->ns", residuals, residuals)
+    along_u = ends[:, 0] - starts[:, 0]
+    along_v = ends[:, 1] - starts[:, 1]
+    length_squared = np.maximum(along_u * along_u + along_v * along_v, 1e-12)
+    # u and v apart, in place: einsum over a last axis of 2 costs more than the arithmetic.
+    offset_u = samples[:, 0:1] - starts[:, 0]  # (N, S)
+    offset_v = samples[:, 1:2] - starts[:, 1]
+    s = offset_u * along_u
+    s += offset_v * along_v
+    s /= length_squared
+    np.clip(s, 0.0, 1.0, out=s)
+    offset_u -= s * along_u  # now the residual: sample minus closest point
+    offset_v -= s * along_v
+    distance_squared = offset_u * offset_u
+    distance_squared += offset_v * offset_v
     nearest = np.argmin(distance_squared, axis=1)
     rows = np.arange(samples.shape[0])
-    s_near, residual = s[rows, nearest], residuals[rows, nearest]  # (N,), (N, 2)
+    s_near = s[rows, nearest]
     weight = np.exp(-distance_squared[rows, nearest] / scale**2)
     count = samples.shape[0]
     value = -0.5 * scale * float(np.mean(1.0 - weight))
-    # d(-c/2 (1 - w))/d p = (w / c) r for the closest point p; p = (1 - s) a + s b.
-    pull = (weight / (scale * count))[:, None] * residual
-    gradient = np.zeros_like(end_pixels)
-    np.add.at(gradient, start_index[nearest], (1.0 - s_near)[:, None] * pull)
-    np.add.at(gradient, end_index[nearest], s_near[:, None] * pull)
+    pull = weight / (scale * count)
+    pull_u, pull_v = pull * offset_u[rows, nearest], pull * offset_v[rows, nearest]
+    # One bincount over the starts then the ends adds in np.add.at's order (the same sums to the bit).
+    frames = end_pixels.shape[0]
+    index = np.concatenate((start_index[nearest], end_index[nearest]))
+    share = np.concatenate((1.0 - s_near, s_near))
+    gradient = np.empty_like(end_pixels)
+    gradient[:, 0] = np.bincount(index, share * np.tile(pull_u, 2), frames)
+    gradient[:, 1] = np.bincount(index, share * np.tile(pull_v, 2), frames)
     return value, gradient
 
 
@@ -201,9 +213,19 @@ def _nearest_squared(samples: np.ndarray, starts: np.ndarray, ends: np.ndarray) 
     """
     if starts.shape[1] == 0:
         return np.full((starts.shape[0], samples.shape[0]), np.inf)
-    along = ends - starts
-    length_squared = np.maximum(np.einsum("csi,csi->cs", along, along), 1e-12)
-    offsets = samples[None, :, None, :] - starts[:, None, :, :]  # (C, N, S, 2)
-    s = np.clip(np.einsum("cnsi,csi->cns", offsets, along) / length_squared[:, None, :], 0.0, 1.0)
-    residuals = offsets - s[..., None] * along[:, None, :, :]
-    return np.einsum("cnsi,cnsi->cns", residuals, residuals).min(axis=2)
+    along_u = (ends[..., 0] - starts[..., 0])[..., None]  # (C, S, 1)
+    along_v = (ends[..., 1] - starts[..., 1])[..., None]
+    length_squared = np.maximum(along_u * along_u + along_v * along_v, 1e-12)
+    # (C, S, N), u and v apart and in place: the smallest temporaries for the search's many candidates.
+    offset_u = samples[:, 0] - starts[..., 0:1]  # (C, S, N)
+    offset_v = samples[:, 1] - starts[..., 1:2]
+    s = offset_u * along_u
+    s += offset_v * along_v
+    s /= length_squared
+    np.clip(s, 0.0, 1.0, out=s)
+    offset_u -= s * along_u
+    offset_v -= s * along_v
+    np.multiply(offset_u, offset_u, out=offset_u)
+    np.multiply(offset_v, offset_v, out=offset_v)
+    offset_u += offset_v
+    return offset_u.min(axis=1)
