@@ -138,23 +138,26 @@ class SupportImage:
         # so that u = W - 1 interpolates with weight 1 on the last pixel.
         column0 = np.minimum(u.astype(np.intp), max(width - 2, 0))
         row0 = np.minimum(v.astype(np.intp), max(height - 2, 0))
-        column1 = np.minimum(column0 + 1, width - 1)
-        row1 = np.minimum(row0 + 1, height - 1)
         fraction_u = u - column0
         fraction_v = v - row0
-        flat = self.values.ravel()
-        top_left = flat[row0 * width + column0].astype(np.float64)
-        top_right = flat[row0 * width + column1].astype(np.float64)
-        bottom_left = flat[row1 * width + column0].astype(np.float64)
-        bottom_right = flat[row1 * width + column1].astype(np.float64)
+        # The four corners in one gather: top left, top right, bottom left, bottom right (a
+        # one-pixel-wide or -high image repeats its column or row).
+        top_left_index = row0 * width + column0
+        corners = np.empty((4, pixels.shape[0]), dtype=np.intp)
+        corners[0] = top_left_index
+        corners[1] = top_left_index + min(width - 1, 1)
+        corners[2] = top_left_index + min(height - 1, 1) * width
+        corners[3] = corners[2] + min(width - 1, 1)
+        top_left, top_right, bottom_left, bottom_right = self.values.ravel().take(corners).astype(np.float64)
         top = top_left + fraction_u * (top_right - top_left)
         bottom = bottom_left + fraction_u * (bottom_right - bottom_left)
         values = top + fraction_v * (bottom - top)
         gradient = np.empty((pixels.shape[0], 2))
         gradient[:, 0] = (1.0 - fraction_v) * (top_right - top_left) + fraction_v * (bottom_right - bottom_left)
         gradient[:, 1] = bottom - top
-        gradient[:, 0] *= (pixels[:, 0] >= 0.0) & (pixels[:, 0] <= width - 1)
-        gradient[:, 1] *= (pixels[:, 1] >= 0.0) & (pixels[:, 1] <= height - 1)
+        # Zero along an axis where the clip moved the point (outside the image).
+        gradient[:, 0] *= u == pixels[:, 0]
+        gradient[:, 1] *= v == pixels[:, 1]
         return SupportSample(values, gradient)
 
 
