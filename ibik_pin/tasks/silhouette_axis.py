@@ -128,16 +128,14 @@ class SilhouetteAxisTask(SegmentCriterion):
         The distances to the segments that no `moved` row ends are computed once, not per
         candidate; a view with an end behind the camera is skipped for that candidate.
         """
-        candidates, frames = frame_positions.shape[:2]
+        candidates = frame_positions.shape[0]
         changing = np.ones(len(self.segments), dtype=bool)
         if moved is not None:
             changing = np.isin(self._start_index, moved) | np.isin(self._end_index, moved)
         values = np.zeros(candidates)
         counts = np.zeros(candidates)
         for view in self._active_views:
-            pixels, _, depth = view.camera.project_with_jacobian(frame_positions.reshape(-1, 3))
-            pixels = pixels.reshape(candidates, frames, 2)
-            visible = (depth.reshape(candidates, frames) > 1e-6).all(axis=1)
+            pixels, visible = _project_candidates(view.camera, frame_positions, moved)
             nearest = _nearest_squared(view.pixels, pixels[:, self._start_index[changing]],
                                        pixels[:, self._end_index[changing]])  # (C, N)
             if not changing.all():
@@ -155,6 +153,23 @@ class SilhouetteAxisTask(SegmentCriterion):
 
     def compute_gradient(self, configuration: Configuration) -> np.ndarray:
         return self._evaluate(configuration)[1]
+
+
+def _project_candidates(camera: CameraLike, frame_positions: np.ndarray,
+                        moved: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels (C, K, 2) of (C, K, 3) placements and whether each candidate has every end in front
+    of the camera (C,); the rows not `moved` are the same in every candidate, so projected once."""
+    candidates, frames = frame_positions.shape[:2]
+    if moved is None:
+        pixels, _, depth = camera.project_with_jacobian(frame_positions.reshape(-1, 3))
+        return pixels.reshape(candidates, frames, 2), (depth.reshape(candidates, frames) > 1e-6).all(axis=1)
+    shared, _, shared_depth = camera.project_with_jacobian(frame_positions[0])
+    moving, _, moving_depth = camera.project_with_jacobian(frame_positions[:, moved].reshape(-1, 3))
+    pixels = np.repeat(shared[None], candidates, axis=0)
+    pixels[:, moved] = moving.reshape(candidates, len(moved), 2)
+    in_front = np.repeat(shared_depth[None] > 1e-6, candidates, axis=0)
+    in_front[:, moved] = moving_depth.reshape(candidates, len(moved)) > 1e-6
+    return pixels, in_front.all(axis=1)
 
 
 def _axis_value_and_pixel_gradient(
