@@ -162,14 +162,14 @@ def _project_candidates(camera: CameraLike, frame_positions: np.ndarray,
     candidates, frames = frame_positions.shape[:2]
     if moved is None:
         pixels, _, depth = camera.project_with_jacobian(frame_positions.reshape(-1, 3))
-        return pixels.reshape(candidates, frames, 2), (depth.reshape(candidates, frames) > 1e-6).all(axis=1)
+        return pixels.reshape(candidates, frames, 2), np.all(depth.reshape(candidates, frames) > 1e-6, axis=1)
     shared, _, shared_depth = camera.project_with_jacobian(frame_positions[0])
     moving, _, moving_depth = camera.project_with_jacobian(frame_positions[:, moved].reshape(-1, 3))
     pixels = np.repeat(shared[None], candidates, axis=0)
     pixels[:, moved] = moving.reshape(candidates, len(moved), 2)
     in_front = np.repeat(shared_depth[None] > 1e-6, candidates, axis=0)
     in_front[:, moved] = moving_depth.reshape(candidates, len(moved)) > 1e-6
-    return pixels, in_front.all(axis=1)
+    return pixels, np.all(in_front, axis=1)
 
 
 def _axis_value_and_pixel_gradient(
