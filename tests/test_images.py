@@ -324,3 +324,25 @@ def test_temporal_majority_reads_each_frame_once_in_order():
 def test_temporal_majority_rejects_a_radius_that_is_not_a_positive_whole_number(radius):
     with pytest.raises(InputError, match="radius"):
         TemporalMajority(lambda frame: [], 5, radius=radius)
+
+
+def test_sampling_equals_a_plain_bilinear_reading_inside_and_outside_the_image():
+    """The one-gather interpolation against the four corners read one point at a time, on seeded
+    points inside, on the border, beyond it and at infinity, for images down to one pixel wide."""
+    rng = np.random.default_rng(8)
+    for height, width in [(48, 64), (1, 5), (5, 1), (1, 1), (2, 2)]:
+        values = rng.normal(size=(height, width)).astype(np.float32)
+        pixels = np.column_stack([rng.uniform(-3.0, width + 2.0, 60), rng.uniform(-3.0, height + 2.0, 60)])
+        pixels[:5, 0], pixels[5:10, 1], pixels[10] = np.inf, -np.inf, [width - 1, height - 1]
+        sample = SupportImage(values).sample(pixels)
+        for (u, v), value, gradient in zip(pixels, sample.values, sample.gradient, strict=True):
+            cu, cv = min(max(u, 0.0), width - 1), min(max(v, 0.0), height - 1)
+            c0, r0 = min(int(cu), max(width - 2, 0)), min(int(cv), max(height - 2, 0))
+            c1, r1 = min(c0 + 1, width - 1), min(r0 + 1, height - 1)
+            a, b, c, d = (float(values[r, c]) for r, c in [(r0, c0), (r0, c1), (r1, c0), (r1, c1)])
+            fu, fv = cu - c0, cv - r0
+            top, bottom = a + fu * (b - a), c + fu * (d - c)
+            assert value == pytest.approx(top + fv * (bottom - top), abs=1e-12)
+            expected = [((1 - fv) * (b - a) + fv * (d - c)) * (0.0 <= u <= width - 1),
+                        (bottom - top) * (0.0 <= v <= height - 1)]
+            np.testing.assert_allclose(gradient, expected, atol=1e-12)

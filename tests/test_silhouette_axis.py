@@ -6,7 +6,12 @@ import pytest
 from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError
 from ibik_pin.tasks import ImageTask, View
-from ibik_pin.tasks.silhouette_axis import AxisView, SilhouetteAxisTask
+from ibik_pin.tasks.silhouette_axis import (
+    AxisView,
+    SilhouetteAxisTask,
+    _axis_value_and_pixel_gradient,
+    _nearest_squared,
+)
 from ibik_pin.tasks.weighted_sum import WeightedSum
 from ibik_pin.vision.medial_axis import medial_axis_pixels
 from ibik_pin.vision.pinhole import look_at_camera
@@ -134,3 +139,49 @@ def test_the_image_values_at_with_the_moved_frames_named_equal_the_full_evaluati
     positions[:, row] += rng.normal(0.0, 0.05, (5, 3))
     np.testing.assert_allclose(image.values_at(positions, moved=np.array([row])), image.values_at(positions),
                                rtol=1e-12, atol=1e-12)
+
+
+
+def _plain_closest(sample, a, b):
+    """The closest point's parameter s on segment a-b and the residual sample - closest point."""
+    along = b - a
+    s = float(np.clip((sample - a) @ along / max(along @ along, 1e-12), 0.0, 1.0))
+    return s, sample - (a + s * along)
+
+
+def _plain_axis_term(samples, end_pixels, start_index, end_index, scale):
+    """The axis term of one view and its pixel gradient, sample by sample and segment by segment."""
+    value, gradient = 0.0, np.zeros_like(end_pixels)
+    for sample in samples:
+        closest = [_plain_closest(sample, end_pixels[a], end_pixels[b]) for a, b in zip(start_index, end_index,
+                                                                                       strict=True)]
+        segment = int(np.argmin([residual @ residual for _, residual in closest]))
+        s, residual = closest[segment]
+        weight = np.exp(-(residual @ residual) / scale**2)
+        value -= 0.5 * scale * (1.0 - weight) / len(samples)
+        pull = weight / (scale * len(samples)) * residual
+        gradient[start_index[segment]] += (1.0 - s) * pull
+        gradient[end_index[segment]] += s * pull
+    return value, gradient
+
+
+def test_the_vectorised_axis_term_equals_the_plain_one(human, rng):
+    """The in-place computation of the term and its gradient, and the candidates' nearest distances
+    in (C, S, N), against loops over samples and segments, on seeded problems."""
+    task = SilhouetteAxisTask(human)
+    frames = len(task.frame_ids)
+    for _ in range(5):
+        samples = rng.uniform(0.0, 320.0, (40, 2))
+        end_pixels = rng.uniform(0.0, 320.0, (frames, 2))
+        end_pixels[task._end_index[0]] = end_pixels[task._start_index[0]]  # a segment of zero length
+        value, gradient = _axis_value_and_pixel_gradient(samples, end_pixels, task._start_index,
+                                                         task._end_index, 15.0)
+        plain_value, plain_gradient = _plain_axis_term(samples, end_pixels, task._start_index,
+                                                       task._end_index, 15.0)
+        np.testing.assert_allclose(value, plain_value, rtol=1e-12)
+        np.testing.assert_allclose(gradient, plain_gradient, rtol=1e-10, atol=1e-15)
+        starts, ends = rng.uniform(0.0, 320.0, (2, 7, 3, 2))  # 7 candidates, 3 segments each
+        plain = [[min(float(residual @ residual) for _, residual in
+                      (_plain_closest(sample, a[k], b[k]) for k in range(3))) for sample in samples]
+                 for a, b in zip(starts, ends, strict=True)]
+        np.testing.assert_allclose(_nearest_squared(samples, starts, ends), plain, rtol=1e-12, atol=1e-9)

@@ -181,8 +181,10 @@ def test_an_unknown_solver_name_lists_the_available_ones():
 
 def test_qp_objects_are_kept_between_steps(human):
     levels = human_levels(human, random_human_configuration(human, np.random.default_rng(1)))
-    # Per-step bounds so small that every level's unconstrained step violates them: QP each time.
-    solver = HierarchicalQPSolver(limits=JointLimits(human.model, max_step=1e-3, max_root_translation=1e-3))
+    # Per-step bounds so small that every level's unconstrained step violates them: QP each time
+    # (proxsuite's, the active-set rounds off).
+    solver = HierarchicalQPSolver(limits=JointLimits(human.model, max_step=1e-3, max_root_translation=1e-3),
+                                  active_set=False)
     configuration = Configuration(human.model)
     solver.compute_step(configuration, levels)
     first = dict(solver._qps)
@@ -211,6 +213,69 @@ def test_proxsuite_level_solution_equals_the_damped_least_squares_step_without_a
                                    np.full(42, -1e20), np.full(42, 1e20))
         w_stack, _ = damped_solve(projected, b, solver.damping)
         assert np.max(np.abs(w_qp - w_stack)) < 1e-6
+
+
+def _bounded_level(rng, n, nv, damping):
+    """A least-squares level as the QP poses it: H = P'P + damping^2 I, g, an orthonormal null basis
+    as the constraint and a box around w = 0 that the unconstrained optimum breaks."""
+    projected = rng.normal(size=(3, n))
+    hessian = projected.T @ projected + damping**2 * np.eye(n)
+    linear = -projected.T @ rng.normal(size=3)
+    constraint = np.linalg.qr(rng.normal(size=(nv, n)))[0]
+    lower, upper = -rng.uniform(0.0, 0.3, nv), rng.uniform(0.0, 0.3, nv)
+    return hessian, linear, constraint, lower, upper
+
+
+def _enumerated_optimum(hessian, linear, constraint, lower, upper):
+    """The QP's optimum by trying every set of active bounds (each row at its lower or upper bound,
+    or free) and keeping the feasible KKT point of least cost: a plain reference for small sizes."""
+    import itertools
+
+    n, rows = hessian.shape[0], constraint.shape[0]
+    best, best_cost = None, np.inf
+    for sides in itertools.product((None, "lower", "upper"), repeat=rows):
+        active = [i for i in range(rows) if sides[i] is not None]
+        if len(active) > n:
+            continue
+        held = constraint[active]
+        kkt = np.block([[hessian, held.T], [held, np.zeros((len(active), len(active)))]])
+        targets = [lower[i] if sides[i] == "lower" else upper[i] for i in active]
+        try:
+            w = np.linalg.solve(kkt, np.concatenate([-linear, targets]))[:n]
+        except np.linalg.LinAlgError:
+            continue
+        values = constraint @ w
+        cost = 0.5 * w @ hessian @ w + linear @ w
+        if np.all(values >= lower - 1e-12) and np.all(values <= upper + 1e-12) and cost < best_cost:
+            best, best_cost = w, cost
+    return best
+
+
+def test_the_active_set_method_finds_the_qp_optimum_of_every_seeded_level():
+    """Against every active set tried in turn (3 variables, 6 bounds), and against proxsuite and its
+    polish (the active-set method off) on larger levels; each level's unconstrained optimum breaks
+    a bound."""
+    from ibik_pin.solvers.hqp import _primal_active_set
+
+    rng = np.random.default_rng(11)
+    solver = HierarchicalQPSolver(active_set=False)
+    solved = 0
+    for n, nv, reference in [(3, 6, "enumeration")] * 30 + [(12, 44, "proxsuite")] * 30:
+        hessian, linear, constraint, lower, upper = _bounded_level(rng, n, nv, solver.damping)
+        unconstrained = np.linalg.solve(hessian, -linear)
+        values = constraint @ unconstrained
+        if np.all((values >= lower) & (values <= upper)):
+            continue
+        w = _primal_active_set(hessian, linear, constraint, lower, upper)
+        assert w is not None
+        solved += 1
+        if reference == "enumeration":
+            np.testing.assert_allclose(w, _enumerated_optimum(hessian, linear, constraint, lower, upper),
+                                       atol=1e-10)
+        else:
+            expected = solver._solve_level(0, hessian, linear, constraint, lower, upper)
+            np.testing.assert_allclose(w, expected, atol=1e-8)
+    assert solved >= 40
 
 
 class PullingAgainstTheWrist(GradientTask):
@@ -290,10 +355,10 @@ def test_a_task_with_nan_rows_raises_a_solver_error_instead_of_a_nan_step(human,
 def test_a_failed_svd_is_raised_as_a_solver_error(monkeypatch):
     from ibik_pin.solvers import nullspace
 
-    def failing_svd(*arguments, **keywords):
-        raise np.linalg.LinAlgError("SVD did not converge")
+    def failing_svd(matrix):  # LAPACK's status when the SVD does not converge
+        return np.zeros((3, 3)), np.zeros(3), np.zeros((6, 6)), 1
 
-    monkeypatch.setattr(nullspace.np.linalg, "svd", failing_svd)
+    monkeypatch.setattr(nullspace, "_svd", failing_svd)
     with pytest.raises(SolverError, match=r"the SVD of a level's projected Jacobian \(3, 6\) failed"):
         nullspace.damped_solve(np.ones((3, 6)), np.ones(3), DEFAULT_DAMPING)
 
@@ -308,8 +373,9 @@ def test_a_proxsuite_failure_skips_its_level_and_is_reported_failed(human, monke
 
     monkeypatch.setattr(proxsuite.proxqp.dense, "QP", BrokenQP)
     levels = human_levels(human, random_human_configuration(human, np.random.default_rng(1)))
-    # Per-step bounds so small that every level needs the QP.
-    solver = HierarchicalQPSolver(limits=JointLimits(human.model, max_step=1e-3, max_root_translation=1e-3))
+    # Per-step bounds so small that every level needs the QP (proxsuite's, the active-set rounds off).
+    solver = HierarchicalQPSolver(limits=JointLimits(human.model, max_step=1e-3, max_root_translation=1e-3),
+                                  active_set=False)
     result = solver.solve(Configuration(human.model), levels, iterations=2)
     # The posture level, after two skipped levels, fits its bounds without a QP.
     assert [report.status for report in result.levels] == ["failed", "failed", "solved"]

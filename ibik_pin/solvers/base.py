@@ -138,15 +138,17 @@ def build_levels(configuration: Configuration, levels: Levels, adaptation: StepA
         elif tasks:
             least_squares = cast(list[Task], tasks)  # no gradient task in this level
             rows = [task.compute_linear_system(configuration) for task in least_squares]
-            for least_squares_task, (A, b) in zip(least_squares, rows, strict=True):
-                # NaN rows would turn the whole step, then q, into NaN without a word.
-                if not (np.all(np.isfinite(A)) and np.all(np.isfinite(b))):
-                    raise SolverError(
-                        f"{type(least_squares_task).__name__} gave a non-finite error or Jacobian (NaN or infinity); "
-                        "no step can be computed"
-                    )
-            built.append(LeastSquaresLevel(np.vstack([A for A, _ in rows]),
-                                           np.concatenate([b for _, b in rows])))
+            level_rows = LeastSquaresLevel(np.vstack([A for A, _ in rows]), np.concatenate([b for _, b in rows]))
+            # NaN rows would turn the whole step, then q, into NaN without a word. One check of the
+            # level's rows (tasks are many, each check a few numpy calls), then the culprit named.
+            if not (np.isfinite(level_rows.A).all() and np.isfinite(level_rows.b).all()):
+                culprit = next(task for task, (A, b) in zip(least_squares, rows, strict=True)
+                               if not (np.isfinite(A).all() and np.isfinite(b).all()))
+                raise SolverError(
+                    f"{type(culprit).__name__} gave a non-finite error or Jacobian (NaN or infinity); "
+                    "no step can be computed"
+                )
+            built.append(level_rows)
         else:
             built.append(None)
     return built

@@ -7,6 +7,7 @@ space (P_k = Z_k Z_k^T), computed from one SVD of each level's projected Jacobia
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg import lapack
 
 from ibik_pin.exceptions import SolverError
 from ibik_pin.solvers.base import GradientLevel
@@ -14,6 +15,14 @@ from ibik_pin.solvers.base import GradientLevel
 # Singular values below RANK_TOLERANCE * max(1, sigma_max) count as zero for the null space: small
 # enough that lower levels leak < 1e-8 into higher ones, while damping keeps the steps bounded.
 RANK_TOLERANCE = 1e-10
+
+
+def _svd(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """U, sigma, V^T (full) and LAPACK's status of a small matrix: the gesdd that np.linalg.svd
+    calls, called directly, which spares numpy's wrapper a quarter of the time on these sizes.
+    U and V^T come back in C order, as numpy's: the products that use them then round alike."""
+    u, sigma, vt, info = lapack.dgesdd(matrix, compute_uv=1, full_matrices=1)
+    return np.ascontiguousarray(u), sigma, np.ascontiguousarray(vt), info
 
 
 def damped_solve(
@@ -33,10 +42,10 @@ def damped_solve(
     Raises:
         SolverError: LAPACK's SVD did not converge.
     """
-    try:
-        u, sigma, vt = np.linalg.svd(projected, full_matrices=True)
-    except np.linalg.LinAlgError as error:
-        raise SolverError(f"the SVD of a level's projected Jacobian {projected.shape} failed: {error}") from error
+    u, sigma, vt, info = _svd(projected)
+    if info != 0:
+        raise SolverError(f"the SVD of a level's projected Jacobian {projected.shape} failed: LAPACK's gesdd "
+                          f"returned {info}")
     rank = int(np.sum(sigma > RANK_TOLERANCE * max(1.0, sigma[0] if sigma.size else 0.0)))
     damped = sigma[:rank] / (sigma[:rank] ** 2 + damping**2)
     w = vt[:rank].T @ (damped * (u[:, :rank].T @ residual))
@@ -48,7 +57,7 @@ def remove_direction(reduced: np.ndarray) -> np.ndarray:
     norm = np.linalg.norm(reduced)
     if norm <= RANK_TOLERANCE:
         return np.eye(reduced.size)
-    _, _, vt = np.linalg.svd(reduced[None, :] / norm)
+    _, _, vt, _ = _svd(reduced[None, :] / norm)
     return vt[1:].T
 
 

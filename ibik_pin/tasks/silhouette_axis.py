@@ -128,16 +128,14 @@ class SilhouetteAxisTask(SegmentCriterion):
         The distances to the segments that no `moved` row ends are computed once, not per
         candidate; a view with an end behind the camera is skipped for that candidate.
         """
-        candidates, frames = frame_positions.shape[:2]
+        candidates = frame_positions.shape[0]
         changing = np.ones(len(self.segments), dtype=bool)
         if moved is not None:
             changing = np.isin(self._start_index, moved) | np.isin(self._end_index, moved)
         values = np.zeros(candidates)
         counts = np.zeros(candidates)
         for view in self._active_views:
-            pixels, _, depth = view.camera.project_with_jacobian(frame_positions.reshape(-1, 3))
-            pixels = pixels.reshape(candidates, frames, 2)
-            visible = (depth.reshape(candidates, frames) > 1e-6).all(axis=1)
+            pixels, visible = _project_candidates(view.camera, frame_positions, moved)
             nearest = _nearest_squared(view.pixels, pixels[:, self._start_index[changing]],
                                        pixels[:, self._end_index[changing]])  # (C, N)
             if not changing.all():
@@ -157,6 +155,23 @@ class SilhouetteAxisTask(SegmentCriterion):
         return self._evaluate(configuration)[1]
 
 
+def _project_candidates(camera: CameraLike, frame_positions: np.ndarray,
+                        moved: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels (C, K, 2) of (C, K, 3) placements and whether each candidate has every end in front
+    of the camera (C,); the rows not `moved` are the same in every candidate, so projected once."""
+    candidates, frames = frame_positions.shape[:2]
+    if moved is None:
+        pixels, _, depth = camera.project_with_jacobian(frame_positions.reshape(-1, 3))
+        return pixels.reshape(candidates, frames, 2), np.all(depth.reshape(candidates, frames) > 1e-6, axis=1)
+    shared, _, shared_depth = camera.project_with_jacobian(frame_positions[0])
+    moving, _, moving_depth = camera.project_with_jacobian(frame_positions[:, moved].reshape(-1, 3))
+    pixels = np.repeat(shared[None], candidates, axis=0)
+    pixels[:, moved] = moving.reshape(candidates, len(moved), 2)
+    in_front = np.repeat(shared_depth[None] > 1e-6, candidates, axis=0)
+    in_front[:, moved] = moving_depth.reshape(candidates, len(moved)) > 1e-6
+    return pixels, np.all(in_front, axis=1)
+
+
 def _axis_value_and_pixel_gradient(
     samples: np.ndarray, end_pixels: np.ndarray, start_index: np.ndarray, end_index: np.ndarray, scale: float
 ) -> tuple[float, np.ndarray]:
@@ -170,23 +185,35 @@ def _axis_value_and_pixel_gradient(
         The view's h_axis [px] and dh/d end_pixels, shape (K, 2).
     """
     starts, ends = end_pixels[start_index], end_pixels[end_index]  # (S, 2)
-    along = ends - starts
-    length_squared = np.maximum(np.einsum("si,si->s", along, along), 1e-12)
-    offsets = samples[:, None, :] - starts[None, :, :]  # (N, S, 2)
-    s = np.clip(np.einsum("nsi,si->ns", offsets, along) / length_squared, 0.0, 1.0)
-    residuals = offsets - s[:, :, None] * along[None, :, :]  # sample minus closest point
-    distance_squared = np.einsum("nsi,nsi->ns", residuals, residuals)
+    along_u = ends[:, 0] - starts[:, 0]
+    along_v = ends[:, 1] - starts[:, 1]
+    length_squared = np.maximum(along_u * along_u + along_v * along_v, 1e-12)
+    # u and v apart, in place: einsum over a last axis of 2 costs more than the arithmetic.
+    offset_u = samples[:, 0:1] - starts[:, 0]  # (N, S)
+    offset_v = samples[:, 1:2] - starts[:, 1]
+    s = offset_u * along_u
+    s += offset_v * along_v
+    s /= length_squared
+    np.clip(s, 0.0, 1.0, out=s)
+    offset_u -= s * along_u  # now the residual: sample minus closest point
+    offset_v -= s * along_v
+    distance_squared = offset_u * offset_u
+    distance_squared += offset_v * offset_v
     nearest = np.argmin(distance_squared, axis=1)
     rows = np.arange(samples.shape[0])
-    s_near, residual = s[rows, nearest], residuals[rows, nearest]  # (N,), (N, 2)
+    s_near = s[rows, nearest]
     weight = np.exp(-distance_squared[rows, nearest] / scale**2)
     count = samples.shape[0]
     value = -0.5 * scale * float(np.mean(1.0 - weight))
-    # d(-c/2 (1 - w))/d p = (w / c) r for the closest point p; p = (1 - s) a + s b.
-    pull = (weight / (scale * count))[:, None] * residual
-    gradient = np.zeros_like(end_pixels)
-    np.add.at(gradient, start_index[nearest], (1.0 - s_near)[:, None] * pull)
-    np.add.at(gradient, end_index[nearest], s_near[:, None] * pull)
+    pull = weight / (scale * count)
+    pull_u, pull_v = pull * offset_u[rows, nearest], pull * offset_v[rows, nearest]
+    # One bincount over the starts then the ends adds in np.add.at's order (the same sums to the bit).
+    frames = end_pixels.shape[0]
+    index = np.concatenate((start_index[nearest], end_index[nearest]))
+    share = np.concatenate((1.0 - s_near, s_near))
+    gradient = np.empty_like(end_pixels)
+    gradient[:, 0] = np.bincount(index, share * np.tile(pull_u, 2), frames)
+    gradient[:, 1] = np.bincount(index, share * np.tile(pull_v, 2), frames)
     return value, gradient
 
 
@@ -201,9 +228,19 @@ def _nearest_squared(samples: np.ndarray, starts: np.ndarray, ends: np.ndarray) 
     """
     if starts.shape[1] == 0:
         return np.full((starts.shape[0], samples.shape[0]), np.inf)
-    along = ends - starts
-    length_squared = np.maximum(np.einsum("csi,csi->cs", along, along), 1e-12)
-    offsets = samples[None, :, None, :] - starts[:, None, :, :]  # (C, N, S, 2)
-    s = np.clip(np.einsum("cnsi,csi->cns", offsets, along) / length_squared[:, None, :], 0.0, 1.0)
-    residuals = offsets - s[..., None] * along[:, None, :, :]
-    return np.einsum("cnsi,cnsi->cns", residuals, residuals).min(axis=2)
+    along_u = (ends[..., 0] - starts[..., 0])[..., None]  # (C, S, 1)
+    along_v = (ends[..., 1] - starts[..., 1])[..., None]
+    length_squared = np.maximum(along_u * along_u + along_v * along_v, 1e-12)
+    # (C, S, N), u and v apart and in place: the smallest temporaries for the search's many candidates.
+    offset_u = samples[:, 0] - starts[..., 0:1]  # (C, S, N)
+    offset_v = samples[:, 1] - starts[..., 1:2]
+    s = offset_u * along_u
+    s += offset_v * along_v
+    s /= length_squared
+    np.clip(s, 0.0, 1.0, out=s)
+    offset_u -= s * along_u
+    offset_v -= s * along_v
+    np.multiply(offset_u, offset_u, out=offset_u)
+    np.multiply(offset_v, offset_v, out=offset_v)
+    offset_u += offset_v
+    return offset_u.min(axis=1)

@@ -121,16 +121,21 @@ class PinholeCamera(Camera):
         radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
         radial_slope = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)  # d radial / d r^2
         xy = x * y
-        x_distorted = x * radial + 2.0 * p1 * xy + p2 * (r2 + 2.0 * x * x)
-        y_distorted = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * xy
+        two_x_x, two_y_y = 2.0 * x * x, 2.0 * y * y  # each shared by a distorted coordinate and its slope
+        x_distorted = x * radial + 2.0 * p1 * xy + p2 * (r2 + two_x_x)
+        y_distorted = y * radial + p1 * (r2 + two_y_y) + 2.0 * p2 * xy
         # d(x_d, y_d) / d(x, y); the two off-diagonal terms are equal.
-        dxd_dx = radial + 2.0 * x * x * radial_slope + 2.0 * p1 * y + 6.0 * p2 * x
-        dyd_dy = radial + 2.0 * y * y * radial_slope + 6.0 * p1 * y + 2.0 * p2 * x
+        dxd_dx = radial + two_x_x * radial_slope + 2.0 * p1 * y + 6.0 * p2 * x
+        dyd_dy = radial + two_y_y * radial_slope + 6.0 * p1 * y + 2.0 * p2 * x
         cross = 2.0 * xy * radial_slope + 2.0 * p1 * x + 2.0 * p2 * y
         K = self.intrinsics
         fx, fy = K[0, 0], K[1, 1]
-        pixels = np.stack((fx * x_distorted + K[0, 2], fy * y_distorted + K[1, 2]), axis=1)
-        # d(u, v) / dX_cam, with d(x, y)/dX_cam = [[1, 0, -x], [0, 1, -y]] / Z.
+        pixels = np.empty((depth.shape[0], 2))
+        np.multiply(fx, x_distorted, out=pixels[:, 0])
+        np.multiply(fy, y_distorted, out=pixels[:, 1])
+        pixels += K[:2, 2]
+        # d(u, v) / dX_cam, with d(x, y)/dX_cam = [[1, 0, -x], [0, 1, -y]] / Z; one (2N, 3) @ (3, 3)
+        # product then takes it to the world.
         jacobian_camera = np.empty((depth.shape[0], 2, 3))
         jacobian_camera[:, 0, 0] = fx * dxd_dx * inverse_depth
         jacobian_camera[:, 0, 1] = fx * cross * inverse_depth
@@ -138,7 +143,8 @@ class PinholeCamera(Camera):
         jacobian_camera[:, 1, 0] = fy * cross * inverse_depth
         jacobian_camera[:, 1, 1] = fy * dyd_dy * inverse_depth
         jacobian_camera[:, 1, 2] = -fy * (cross * x + dyd_dy * y) * inverse_depth
-        return Projection(pixels, jacobian_camera @ self.rotation, depth)
+        jacobian = (jacobian_camera.reshape(-1, 3) @ self.rotation).reshape(-1, 2, 3)
+        return Projection(pixels, jacobian, depth)
 
     def pixel_radius(self, points_world: np.ndarray, radii: np.ndarray) -> np.ndarray:
         """Image radius ``focal * r / depth`` [px] of spheres (N, 3) [m] of radii (N,) [m].

@@ -138,23 +138,26 @@ class SupportImage:
         # so that u = W - 1 interpolates with weight 1 on the last pixel.
         column0 = np.minimum(u.astype(np.intp), max(width - 2, 0))
         row0 = np.minimum(v.astype(np.intp), max(height - 2, 0))
-        column1 = np.minimum(column0 + 1, width - 1)
-        row1 = np.minimum(row0 + 1, height - 1)
         fraction_u = u - column0
         fraction_v = v - row0
-        flat = self.values.ravel()
-        top_left = flat[row0 * width + column0].astype(np.float64)
-        top_right = flat[row0 * width + column1].astype(np.float64)
-        bottom_left = flat[row1 * width + column0].astype(np.float64)
-        bottom_right = flat[row1 * width + column1].astype(np.float64)
+        # The four corners in one gather: top left, top right, bottom left, bottom right (a
+        # one-pixel-wide or -high image repeats its column or row).
+        top_left_index = row0 * width + column0
+        corners = np.empty((4, pixels.shape[0]), dtype=np.intp)
+        corners[0] = top_left_index
+        corners[1] = top_left_index + min(width - 1, 1)
+        corners[2] = top_left_index + min(height - 1, 1) * width
+        corners[3] = corners[2] + min(width - 1, 1)
+        top_left, top_right, bottom_left, bottom_right = self.values.ravel().take(corners).astype(np.float64)
         top = top_left + fraction_u * (top_right - top_left)
         bottom = bottom_left + fraction_u * (bottom_right - bottom_left)
         values = top + fraction_v * (bottom - top)
         gradient = np.empty((pixels.shape[0], 2))
         gradient[:, 0] = (1.0 - fraction_v) * (top_right - top_left) + fraction_v * (bottom_right - bottom_left)
         gradient[:, 1] = bottom - top
-        gradient[:, 0] *= (pixels[:, 0] >= 0.0) & (pixels[:, 0] <= width - 1)
-        gradient[:, 1] *= (pixels[:, 1] >= 0.0) & (pixels[:, 1] <= height - 1)
+        # Zero along an axis where the clip moved the point (outside the image).
+        gradient[:, 0] *= u == pixels[:, 0]
+        gradient[:, 1] *= v == pixels[:, 1]
         return SupportSample(values, gradient)
 
 
@@ -180,11 +183,12 @@ def _signed_distance(mask: np.ndarray) -> np.ndarray:
     # The inside distance only within the silhouette's bounding box grown by one pixel (the same
     # values: every pixel of that ring is background, so no nearer border lies beyond it), which on
     # a person in a 640 x 480 frame is a tenth of the pixels; the outside distance needs them all.
-    rows, columns = box_around(mask, margin_px=1)
-    inside = np.zeros(mask.shape, np.float32)
-    inside[rows, columns] = distance_to_background(mask_u8[rows, columns])
-    outside = distance_to_background(1 - mask_u8)
-    return np.where(mask, inside - 0.5, 0.5 - outside).astype(np.float32)
+    box = box_around(mask, margin_px=1)
+    inside = distance_to_background(mask_u8[box])
+    values = distance_to_background(1 - mask_u8)
+    np.subtract(np.float32(0.5), values, out=values)  # outside: 0.5 - distance
+    values[box] = np.where(mask[box], inside - np.float32(0.5), values[box])
+    return values
 
 
 def distance_to_background(image: np.ndarray) -> np.ndarray:
@@ -198,7 +202,11 @@ def distance_to_background(image: np.ndarray) -> np.ndarray:
         raw = cv2.distanceTransform(np.ascontiguousarray(image, dtype=np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
     except cv2.error as error:  # pragma: no cover - OpenCV rejects only malformed input, checked above
         raise InputError(f"mask: OpenCV's distance transform failed: {error}") from None
-    return np.sqrt(np.rint(np.square(raw, dtype=np.float64))).astype(np.float32)
+    # In place in float32: a square below 2^20 (any 640 x 480 image) is within 0.2 of its whole
+    # number in float32 as in float64, and a float32 square root is the float64 one rounded.
+    np.square(raw, out=raw)
+    np.rint(raw, out=raw)
+    return np.sqrt(raw, out=raw)
 
 
 def box_around(mask: np.ndarray, margin_px: int = 0) -> tuple[slice, slice]:
@@ -265,7 +273,9 @@ def support_from_mask(
         return SupportImage(np.full(mask.shape, inside_value, np.float32))
     values = _signed_distance(mask)
     if inside_cap_px is not None:
-        np.minimum(values, inside_cap_px, out=values)
+        # Only the box can exceed a positive cap: outside it every value is a negative distance.
+        box = box_around(mask)
+        np.minimum(values[box], inside_cap_px, out=values[box])
     if outside_cap_px is not None:
         np.maximum(values, -outside_cap_px, out=values)
     return SupportImage(_smooth(values, smooth_sigma_px))
