@@ -69,8 +69,12 @@ def _solution(model_complexity: int):
     with captured_native_stderr():  # TensorFlow Lite's delegate banner
         import mediapipe as mp
 
+        # No landmark smoothing: MediaPipe's filter lags the motion by about a frame at 60 fps (on the
+        # Pose2Sim demo its landmarks matched Pose2Sim's of the frame before; unsmoothed, the same
+        # frame, and the triangulated wrists came 2-6 mm closer). Its segmentation smoothing changed
+        # no share of keypoints inside the silhouettes there, and stays.
         return mp.solutions.pose.Pose(static_image_mode=False, model_complexity=model_complexity,
-                                      smooth_landmarks=True, enable_segmentation=True, smooth_segmentation=True,
+                                      smooth_landmarks=False, enable_segmentation=True, smooth_segmentation=True,
                                       min_detection_confidence=0.5, min_tracking_confidence=0.5)
 
 
