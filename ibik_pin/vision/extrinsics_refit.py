@@ -13,7 +13,7 @@ coordinates.
 
 Which camera is wrong is left to the user: a detector's landmarks depend on the view (BlazePose's
 hips most), and a wrong camera also raises the others' errors. On the Pose2Sim demo, turning
-cam_01 or cam_03 brings the four errors to within 3 % of the same mean; Pose2Sim's own
+cam_01 or cam_03 brings the four errors to means within 5 % of each other (15.8 and 15.0 px); Pose2Sim's own
 triangulation, from another detector, names cam_03 (docs/method.md, "From video").
 """
 
