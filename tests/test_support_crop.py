@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from ibik_pin.vision.medial_axis import medial_axis_pixels
-from ibik_pin.vision.support import _signed_distance, distance_to_background
+from ibik_pin.vision.support import SupportImage, _signed_distance, distance_to_background, support_from_mask
 
 
 def random_silhouettes(seed: int, count: int, size=(120, 160)):
@@ -73,3 +73,34 @@ def test_the_float32_rounding_equals_the_float64_one_up_to_the_largest_frame():
         raw = cv2.distanceTransform(image, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
         expected = np.sqrt(np.rint(np.square(raw, dtype=np.float64))).astype(np.float32)
         assert np.array_equal(distance_to_background(image), expected)
+
+
+def whole_frame_support(mask: np.ndarray, inside_cap_px: float, smooth_sigma_px: float) -> np.ndarray:
+    values = np.minimum(whole_frame_signed_distance(mask), np.float32(inside_cap_px))
+    if smooth_sigma_px == 0.0:
+        return values
+    return cv2.GaussianBlur(values, (0, 0), sigmaX=smooth_sigma_px, sigmaY=smooth_sigma_px,
+                            borderType=cv2.BORDER_REPLICATE)
+
+
+@pytest.mark.parametrize(("size", "smooth_sigma_px"), [((480, 640), 1.0), ((301, 517), 2.0), ((240, 330), 0.0)])
+def test_a_support_read_on_its_window_around_the_silhouette_equals_the_whole_frames(size, smooth_sigma_px):
+    """Samples near the body are read on the window, others on the whole frame computed then; both
+    give the whole frame's values to the bit (frames whose width is no multiple of the blur's
+    column alignment, silhouettes cut by the frame's edges)."""
+    rng = np.random.default_rng(8)
+    windowed = 0
+    for mask in random_silhouettes(seed=9, count=40, size=size):
+        support = support_from_mask(mask, inside_cap_px=4.0, smooth_sigma_px=smooth_sigma_px)
+        reference = SupportImage(whole_frame_support(mask, 4.0, smooth_sigma_px))
+        rows, columns = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+        near = np.column_stack([rng.uniform(columns[0] - 20, columns[-1] + 20, 200),
+                                rng.uniform(rows[0] - 20, rows[-1] + 20, 200)])
+        far = np.column_stack([rng.uniform(-50, size[1] + 50, 200), rng.uniform(-50, size[0] + 50, 200)])
+        for pixels in (near, far):
+            sample, expected = support.sample(pixels), reference.sample(pixels)
+            assert np.array_equal(sample.values, expected.values)
+            assert np.array_equal(sample.gradient, expected.gradient)
+            windowed += pixels is near and support._values is None
+        assert np.array_equal(support.values, reference.values)
+    assert windowed > 20
