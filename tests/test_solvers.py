@@ -15,6 +15,7 @@ from ibik_pin.solvers import (
     StepAdaptation,
     make_solver,
 )
+from ibik_pin.solvers.base import vector_norm
 from ibik_pin.tasks import FramePositionTask, GradientTask, PostureTask
 from tests.conftest import random_human_configuration
 
@@ -416,3 +417,12 @@ def test_a_gradient_task_holds_no_solver_state_and_each_solver_adapts_its_own_st
     assert qp.step_adaptation.step_size(criterion) == criterion.max_step_size
     stack.solve(configuration, [[wrist], [criterion]], iterations=1)  # a new solve starts afresh
     assert stack.step_adaptation.step_size(criterion) == criterion.max_step_size
+
+
+def test_the_solvers_vector_norm_is_numpys_to_the_bit():
+    rng = np.random.default_rng(12)
+    for size in (1, 3, 8, 44, 1000):
+        for scale in (1e-12, 1.0, 1e8):
+            vector = rng.normal(size=size) * scale
+            assert vector_norm(vector) == np.linalg.norm(vector)
+    assert vector_norm(np.zeros(5)) == 0.0

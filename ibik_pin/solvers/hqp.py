@@ -106,7 +106,7 @@ class HierarchicalQPSolver(Solver):
             lower, upper = self.limits.step_bounds(configuration.q)
         else:
             lower, upper = np.full(nv, -UNBOUNDED), np.full(nv, UNBOUNDED)
-        dq = np.clip(np.zeros(nv), lower, upper)
+        dq = np.zeros(nv).clip(lower, upper)
         null_basis = np.eye(nv)
         failed: set[int] = set()
         for index, level in enumerate(built):
@@ -118,7 +118,7 @@ class HierarchicalQPSolver(Solver):
                 continue
             unconstrained, remaining = step
             candidate = dq + null_basis @ unconstrained
-            if np.all(candidate >= lower) and np.all(candidate <= upper):
+            if (candidate >= lower).all() and (candidate <= upper).all():
                 w = unconstrained  # no bound active: the QP's optimum is the projection stack's step
             else:
                 if isinstance(level, GradientLevel):
@@ -137,7 +137,7 @@ class HierarchicalQPSolver(Solver):
                     failed.add(index)
                     continue
             # proxsuite meets the bounds to eps_abs; clip so the limits hold exactly.
-            dq = np.clip(dq + null_basis @ w, lower, upper)
+            dq = (dq + null_basis @ w).clip(lower, upper)
             null_basis = null_basis @ remaining
         return StepResult(dq, report_levels(built, dq, failed))
 

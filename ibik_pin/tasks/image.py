@@ -124,7 +124,7 @@ class ImageTask(SegmentCriterion):
             pixels, projection_jacobian, depth = view.camera.project_with_jacobian(points)
             support, support_gradient = view.support.sample(pixels)
             in_front = depth > 1e-6
-            value += np.mean(np.where(in_front, support, 0.0))
+            value += np.add.reduce(np.where(in_front, support, 0.0)) / len(points)  # np.mean's sum and division
             contribution = np.einsum("mi,mij->mj", support_gradient, projection_jacobian)
             gradient_points += np.where(in_front[:, None], contribution, 0.0)
         count = max(len(self._active_views), 1)

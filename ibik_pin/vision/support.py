@@ -180,13 +180,12 @@ class SupportImage:
         window = self._window
         if window is not None and window.holds(cell, right, down):
             values, stride = window.values, window.values.shape[1]
-            top_left_index = (cell[1] - window.row) * stride + (cell[0] - window.column)
+            origin = window.row * stride + window.column  # the window's first pixel in the frame
         else:
-            values, stride = self.values, width
-            top_left_index = cell[1] * stride + cell[0]
+            values, stride, origin = self.values, width, 0
         # The four corners in one gather: top left, bottom left, top right, bottom right.
-        offsets = np.array([[0], [down * stride], [right], [down * stride + right]])
-        corners = values.ravel().take(top_left_index + offsets).astype(np.float64)
+        offsets = np.array([[-origin], [down * stride - origin], [right - origin], [down * stride + right - origin]])
+        corners = values.ravel().take(cell[1] * stride + cell[0] + offsets).astype(np.float64)
         across = corners[2:] - corners[:2]  # top right - top left, bottom right - bottom left
         top, bottom = corners[:2] + fraction_u * across
         values = top + fraction_v * (bottom - top)
@@ -367,7 +366,7 @@ class _Window:
         """Whether every pixel cell from corner (column0, row0) (2, N) to (column0 + right,
         row0 + down) lies within."""
         height, width = self.values.shape
-        first, last = cells.min(axis=1), cells.max(axis=1)
+        first, last = np.minimum.reduce(cells, axis=1), np.maximum.reduce(cells, axis=1)
         return bool(first[0] >= self.column and last[0] + right < self.column + width
                     and first[1] >= self.row and last[1] + down < self.row + height)
 
