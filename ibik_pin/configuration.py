@@ -32,6 +32,7 @@ class Configuration:
         # spares Pinocchio's vector wrapper, a third of the time of a frame's position.
         self._placements = [self.data.oMf[frame] for frame in range(model.nframes)]
         self._jacobian_cache: dict[int, np.ndarray] = {}
+        self._stacked_jacobians: dict[bytes, np.ndarray] = {}  # by the frame ids' bytes
         self.version = 0  # a new unique number at every update, so tasks can memoise per state
         self.q = pin.neutral(model) if q is None else self._checked(q)
         self.update()
@@ -51,6 +52,7 @@ class Configuration:
         pin.computeJointJacobians(self.model, self.data, self.q)
         pin.updateFramePlacements(self.model, self.data)
         self._jacobian_cache.clear()
+        self._stacked_jacobians.clear()
         self.version = next(_KINEMATIC_STATES)
 
     @property
@@ -75,8 +77,16 @@ class Configuration:
         return jacobian
 
     def frame_translation_jacobians(self, frame_ids: np.ndarray) -> np.ndarray:
-        """Translation Jacobians of several frames, shape (K, 3, nv)."""
-        return np.stack([self.frame_translation_jacobian(int(i)) for i in frame_ids])
+        """Translation Jacobians of several frames, shape (K, 3, nv), read-only (memoised: the image
+        terms ask for the same frames at every step)."""
+        frame_ids = np.asarray(frame_ids)
+        key = frame_ids.tobytes() + frame_ids.dtype.str.encode()
+        stacked = self._stacked_jacobians.get(key)
+        if stacked is None:
+            stacked = np.stack([self.frame_translation_jacobian(int(i)) for i in frame_ids.reshape(-1)])
+            stacked.setflags(write=False)
+            self._stacked_jacobians[key] = stacked
+        return stacked
 
     def integrate(self, dq: np.ndarray) -> np.ndarray:
         """q (+) dq on the configuration manifold (free-flyer quaternion included), shape (nq,)."""
