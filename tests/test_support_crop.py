@@ -6,8 +6,9 @@ import cv2
 import numpy as np
 import pytest
 
+from ibik_pin.vision.distance import distance_to_background, signed_distance
 from ibik_pin.vision.medial_axis import medial_axis_pixels
-from ibik_pin.vision.support import SupportImage, _signed_distance, distance_to_background, support_from_mask
+from ibik_pin.vision.support import SupportImage, support_from_mask
 
 
 def random_silhouettes(seed: int, count: int, size=(120, 160)):
@@ -24,7 +25,7 @@ def random_silhouettes(seed: int, count: int, size=(120, 160)):
             yield mask
 
 
-def whole_frame_signed_distance(mask: np.ndarray) -> np.ndarray:
+def whole_framesigned_distance(mask: np.ndarray) -> np.ndarray:
     mask_u8 = mask.astype(np.uint8)
     inside, outside = distance_to_background(mask_u8), distance_to_background(1 - mask_u8)
     return np.where(mask.astype(bool), inside - 0.5, 0.5 - outside).astype(np.float32)
@@ -34,7 +35,7 @@ def test_the_signed_distance_from_the_bounding_box_equals_the_whole_frames():
     masks = list(random_silhouettes(seed=3, count=150))
     assert len(masks) > 100
     for mask in masks:
-        assert np.array_equal(_signed_distance(mask.astype(bool)), whole_frame_signed_distance(mask))
+        assert np.array_equal(signed_distance(mask.astype(bool)), whole_framesigned_distance(mask))
 
 
 def test_the_exact_distance_does_not_depend_on_the_part_of_the_image_transformed():
@@ -76,7 +77,7 @@ def test_the_float32_rounding_equals_the_float64_one_up_to_the_largest_frame():
 
 
 def whole_frame_support(mask: np.ndarray, inside_cap_px: float, smooth_sigma_px: float) -> np.ndarray:
-    values = np.minimum(whole_frame_signed_distance(mask), np.float32(inside_cap_px))
+    values = np.minimum(whole_framesigned_distance(mask), np.float32(inside_cap_px))
     if smooth_sigma_px == 0.0:
         return values
     return cv2.GaussianBlur(values, (0, 0), sigmaX=smooth_sigma_px, sigmaY=smooth_sigma_px,

@@ -21,6 +21,7 @@ import numpy as np
 
 from ibik_pin.checks import as_mask
 from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
+from ibik_pin.vision.distance import box_around, shifted, signed_distance
 
 
 class SupportSample(NamedTuple):
@@ -209,65 +210,6 @@ def _positive_or_none(value, name: str) -> float | None:
 
 
 
-def _signed_distance(mask: np.ndarray, region: tuple[slice, slice] | None = None) -> np.ndarray:
-    """(h, w) float32 signed Euclidean distance [px] to the mask's border, positive inside, on
-    `region` of the frame: a box that holds the silhouette's bounding box grown by one pixel (None:
-    the whole frame).
-
-    The border is taken halfway between a set and an unset pixel, hence the 0.5 shifts: the
-    distance then grows by 1 px per pixel across the border as well. The image edge is no
-    border (a body cut by the frame continues outside it). Needs both set and unset pixels.
-    """
-    if region is None:
-        region = (slice(0, mask.shape[0]), slice(0, mask.shape[1]))
-    # The inside distance only within the silhouette's bounding box grown by one pixel (the same
-    # values: every pixel of that ring is background, so no nearer border lies beyond it), which on
-    # a person in a 640 x 480 frame is a tenth of the pixels. The outside distance on the region is
-    # the whole frame's there too: every set pixel, so the nearest, lies within the region.
-    box = box_around(mask, margin_px=1)
-    inside = distance_to_background(mask[box].view(np.uint8))
-    values = distance_to_background(1 - mask[region].view(np.uint8))
-    np.subtract(np.float32(0.5), values, out=values)  # outside: 0.5 - distance
-    box_in_region = _shifted(box, region)
-    values[box_in_region] = np.where(mask[box], inside - np.float32(0.5), values[box_in_region])
-    return values
-
-
-def _shifted(box: tuple[slice, slice], region: tuple[slice, slice]) -> tuple[slice, slice]:
-    """The box's slices in the coordinates of a region that holds it."""
-    return tuple(slice(inner.start - outer.start, inner.stop - outer.start)  # type: ignore[return-value]
-                 for inner, outer in zip(box, region, strict=True))
-
-
-def distance_to_background(image: np.ndarray) -> np.ndarray:
-    """(H, W) float32 exact Euclidean distance [px] of every pixel to the nearest zero pixel.
-
-    OpenCV's precise transform is exact up to its float arithmetic, whose last bits depend on the
-    image's size; every squared distance between pixels is a whole number, so rounding it makes the
-    result the same whatever part of an image is transformed, and ties (ridges) exact.
-    """
-    try:
-        raw = cv2.distanceTransform(np.ascontiguousarray(image, dtype=np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-    except cv2.error as error:  # pragma: no cover - OpenCV rejects only malformed input, checked above
-        raise InputError(f"mask: OpenCV's distance transform failed: {error}") from None
-    # In place in float32: a square below 2^20 (any 640 x 480 image) is within 0.2 of its whole
-    # number in float32 as in float64, and a float32 square root is the float64 one rounded.
-    np.square(raw, out=raw)
-    np.rint(raw, out=raw)
-    return np.sqrt(raw, out=raw)
-
-
-def box_around(mask: np.ndarray, margin_px: int = 0) -> tuple[slice, slice]:
-    """(rows, columns) slices of the bounding box of a non-empty mask's set pixels, grown by
-    `margin_px` on every side and clipped to the image."""
-    rows = np.flatnonzero(mask.any(axis=1))
-    columns = np.flatnonzero(mask.any(axis=0))
-    height, width = mask.shape
-    return (slice(max(int(rows[0]) - margin_px, 0), min(int(rows[-1]) + margin_px + 1, height)),
-            slice(max(int(columns[0]) - margin_px, 0), min(int(columns[-1]) + margin_px + 1, width)))
-
-
-
 def _smooth(values: np.ndarray, sigma_px: float) -> np.ndarray:
     if sigma_px == 0.0:
         return values
@@ -319,27 +261,28 @@ def support_from_mask(
         # No border in the image: every pixel is deep inside.
         inside_value = inside_cap_px if inside_cap_px is not None else float(max(mask.shape))
         return SupportImage(np.full(mask.shape, inside_value, np.float32))
-    support_values = functools.partial(_support_values, mask, inside_cap_px=inside_cap_px,
+    box = box_around(mask)
+    support_values = functools.partial(_support_values, mask, box=box, inside_cap_px=inside_cap_px,
                                        outside_cap_px=outside_cap_px, smooth_sigma_px=smooth_sigma_px)
-    window = _window_around(box_around(mask), mask.shape, smooth_sigma_px)
+    window = _window_around(box, mask.shape, smooth_sigma_px)
     if window is None:
         return SupportImage(support_values(None))
     region, valid = window
-    values = np.ascontiguousarray(support_values(region)[_shifted(valid, region)])  # read by flat indices
+    values = np.ascontiguousarray(support_values(region)[shifted(valid, region)])  # read by flat indices
     return SupportImage._windowed(_Window(values, valid[0].start, valid[1].start), (mask.shape[1], mask.shape[0]),
                                   functools.partial(support_values, None))
 
 
-def _support_values(mask: np.ndarray, region: tuple[slice, slice] | None, inside_cap_px: float | None,
-                    outside_cap_px: float | None, smooth_sigma_px: float) -> np.ndarray:
-    """support_from_mask's values on a region holding the silhouette (None: the whole frame), (h, w)."""
-    values = _signed_distance(mask, region)
+def _support_values(mask: np.ndarray, region: tuple[slice, slice] | None, box: tuple[slice, slice],
+                    inside_cap_px: float | None, outside_cap_px: float | None, smooth_sigma_px: float) -> np.ndarray:
+    """support_from_mask's values on a region holding the silhouette's box (None: the whole frame), (h, w)."""
+    values = signed_distance(mask, region, box)
     if region is None:
         region = (slice(0, mask.shape[0]), slice(0, mask.shape[1]))
     if inside_cap_px is not None:
         # Only the box can exceed a positive cap: outside it every value is a negative distance.
-        box = _shifted(box_around(mask), region)
-        np.minimum(values[box], inside_cap_px, out=values[box])
+        capped = shifted(box, region)
+        np.minimum(values[capped], inside_cap_px, out=values[capped])
     if outside_cap_px is not None:
         np.maximum(values, -outside_cap_px, out=values)
     return _smooth(values, smooth_sigma_px)
@@ -417,7 +360,7 @@ def obstacle_support(object_mask: np.ndarray, influence_px: float) -> SupportIma
         return SupportImage(np.zeros(mask.shape, np.float32))
     if mask.all():
         return SupportImage(np.full(mask.shape, -influence - float(max(mask.shape)), np.float32))
-    distance = -_signed_distance(mask).astype(np.float64)  # positive outside the object
+    distance = -signed_distance(mask).astype(np.float64)  # positive outside the object
     ramp = 1.0 - np.clip(distance, 0.0, influence) / influence
     values = np.where(distance >= 0.0, -influence * ramp * ramp, -influence + 2.0 * distance)
     return SupportImage(values)
