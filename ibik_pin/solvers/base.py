@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Sequence, Set
+from collections.abc import Callable, Sequence, Set
 from dataclasses import dataclass, field
 from typing import cast
 
@@ -91,10 +91,22 @@ class LevelReport:
     status: str
 
 
-@dataclass
 class StepResult:
-    dq: np.ndarray  # (nv,)
-    levels: list[LevelReport]
+    """One step: dq (nv,) and the report of every level.
+
+    The reports may be given as a function that computes them, called when they are first read: a
+    solve reads its last step's only, and a report costs a residual per level.
+    """
+
+    def __init__(self, dq: np.ndarray, levels: list[LevelReport] | Callable[[], list[LevelReport]]) -> None:
+        self.dq = dq
+        self._levels = levels
+
+    @property
+    def levels(self) -> list[LevelReport]:
+        if callable(self._levels):
+            self._levels = self._levels()
+        return self._levels
 
 
 @dataclass

@@ -24,6 +24,7 @@ skips that level (reported "failed"), never raises.
 
 from __future__ import annotations
 
+import functools
 from typing import cast
 
 import numpy as np
@@ -139,7 +140,7 @@ class HierarchicalQPSolver(Solver):
             # proxsuite meets the bounds to eps_abs; clip so the limits hold exactly.
             dq = (dq + null_basis @ w).clip(lower, upper)
             null_basis = null_basis @ remaining
-        return StepResult(dq, report_levels(built, dq, failed))
+        return StepResult(dq, functools.partial(report_levels, built, dq.copy(), failed))
 
     def _solve_level(self, index, hessian, linear, constraint, lower, upper) -> np.ndarray | None:
         """proxsuite solve of min 1/2 w'Hw + g'w s.t. lower <= C w <= upper; None if it failed.
