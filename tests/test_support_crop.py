@@ -105,3 +105,12 @@ def test_a_support_read_on_its_window_around_the_silhouette_equals_the_whole_fra
             windowed += pixels is near and support._values is None
         assert np.array_equal(support.values, reference.values)
     assert windowed > 20
+
+
+def test_a_windowed_support_reads_no_pixels_as_the_whole_frame_does():
+    mask = np.zeros((480, 640), bool)
+    mask[100:200, 300:360] = True
+    windowed, whole = support_from_mask(mask), SupportImage(support_from_mask(mask).values)
+    sample, expected = windowed.sample(np.zeros((0, 2))), whole.sample(np.zeros((0, 2)))
+    assert sample.values.shape == (0,) and sample.gradient.shape == (0, 2)
+    assert np.array_equal(sample.values, expected.values) and np.array_equal(sample.gradient, expected.gradient)

@@ -309,6 +309,8 @@ class _Window:
         """Whether every pixel cell from corner (column0, row0) (2, N) to (column0 + right,
         row0 + down) lies within."""
         height, width = self.values.shape
+        if cells.shape[1] == 0:
+            return True
         first, last = np.minimum.reduce(cells, axis=1), np.maximum.reduce(cells, axis=1)
         return bool(first[0] >= self.column and last[0] + right < self.column + width
                     and first[1] >= self.row and last[1] + down < self.row + height)
