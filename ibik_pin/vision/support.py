@@ -119,7 +119,7 @@ class SupportImage:
         if self._values is None:
             values = cast(Callable[[], np.ndarray], self._whole_frame)()
             values.setflags(write=False)
-            self._values = values
+            self._values, self._whole_frame = values, None  # the mask it was computed from let go
         return self._values
 
     @property
