@@ -49,17 +49,18 @@ class JointLimits:
 
     def step_bounds(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Bounds on dq for a step from q, each shape (nv,)."""
-        lower_step = -self.step.copy()
+        lower_step = -self.step
         upper_step = self.step.copy()
         q_limited = q[self.q_index]
         lower = np.maximum(lower_step[self.v_index], self.lower - q_limited)
         upper = np.minimum(upper_step[self.v_index], self.upper - q_limited)
         # Outside the limits by more than one step the box would be empty: land on the limit.
         empty = lower > upper
-        below = empty & (q_limited < self.lower)
-        above = empty & (q_limited > self.upper)
-        upper = np.where(below, lower, upper)
-        lower = np.where(above, upper, lower)
+        if empty.any():
+            below = empty & (q_limited < self.lower)
+            above = empty & (q_limited > self.upper)
+            upper = np.where(below, lower, upper)
+            lower = np.where(above, upper, lower)
         lower_step[self.v_index] = lower
         upper_step[self.v_index] = upper
         return lower_step, upper_step

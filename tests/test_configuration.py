@@ -44,3 +44,28 @@ def test_a_non_finite_configuration_is_refused(human):
     q[10] = np.nan
     with pytest.raises(InputError, match="finite"):
         Configuration(human.model, q)
+
+
+def test_frame_positions_follow_every_update_as_pinocchio_gives_them(human, rng):
+    configuration = Configuration(human.model)
+    data = human.model.createData()
+    frames = np.arange(human.model.nframes)
+    for _ in range(5):
+        q = random_human_configuration(human, rng)
+        configuration.update(q)
+        pin.framesForwardKinematics(human.model, data, q)
+        expected = np.array([data.oMf[int(frame)].translation for frame in frames])
+        assert np.array_equal(configuration.frame_positions(frames), expected)
+        assert np.array_equal(configuration.frame_position(int(frames[-1])), expected[-1])
+
+
+def test_stacked_frame_jacobians_are_memoised_read_only_until_the_next_update(human, rng):
+    configuration = Configuration(human.model, random_human_configuration(human, rng))
+    frames = human.frame_ids(["LWrist", "Head", "RBigToe"])
+    first = configuration.frame_translation_jacobians(frames)
+    assert configuration.frame_translation_jacobians(frames) is first and not first.flags.writeable
+    q = random_human_configuration(human, rng)
+    configuration.update(q)
+    expected = np.stack([pin.getFrameJacobian(human.model, configuration.data, int(frame),
+                                              pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)[:3] for frame in frames])
+    assert np.array_equal(configuration.frame_translation_jacobians(frames), expected)

@@ -4,6 +4,7 @@ import pytest
 
 from ibik_pin.exceptions import InputError
 from ibik_pin.limits import JointLimits
+from tests.conftest import random_human_configuration
 
 
 def test_limits_come_from_the_urdf(human):
@@ -61,3 +62,20 @@ def test_a_coordinate_above_its_upper_limit_is_brought_back_onto_it(human):
     lower, upper = limits.step_bounds(q)
     v = limits.v_index[joint]
     assert lower[v] == upper[v] == pytest.approx(-0.8)
+
+
+def test_step_bounds_equal_a_plain_reading_of_the_rule(human, rng):
+    """Seeded configurations inside, at and beyond the limits, against the rule coordinate by coordinate."""
+    limits = JointLimits(human.model, max_step=0.3)
+    for _ in range(50):
+        q = random_human_configuration(human, rng)
+        q[limits.q_index] = rng.uniform(limits.lower - 1.0, limits.upper + 1.0)
+        lower, upper = limits.step_bounds(q)
+        expected_lower, expected_upper = -limits.step.copy(), limits.step.copy()
+        for k, (qi, vi) in enumerate(zip(limits.q_index, limits.v_index, strict=True)):
+            low = max(-limits.step[vi], limits.lower[k] - q[qi])
+            high = min(limits.step[vi], limits.upper[k] - q[qi])
+            if low > high:
+                low, high = (low, low) if q[qi] < limits.lower[k] else (high, high)
+            expected_lower[vi], expected_upper[vi] = low, high
+        assert np.array_equal(lower, expected_lower) and np.array_equal(upper, expected_upper)

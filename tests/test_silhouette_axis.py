@@ -5,11 +5,12 @@ import pytest
 
 from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError
-from ibik_pin.tasks import ImageTask, View
+from ibik_pin.tasks import ImageTask, View, silhouette_axis
 from ibik_pin.tasks.silhouette_axis import (
     AxisView,
     SilhouetteAxisTask,
     _axis_value_and_pixel_gradient,
+    _may_come_nearer,
     _nearest_squared,
 )
 from ibik_pin.tasks.weighted_sum import WeightedSum
@@ -185,3 +186,30 @@ def test_the_vectorised_axis_term_equals_the_plain_one(human, rng):
                       (_plain_closest(sample, a[k], b[k]) for k in range(3))) for sample in samples]
                  for a, b in zip(starts, ends, strict=True)]
         np.testing.assert_allclose(_nearest_squared(samples, starts, ends), plain, rtol=1e-12, atol=1e-9)
+
+
+def test_only_samples_that_no_candidate_segment_comes_nearer_to_are_skipped(rng):
+    skipped = 0
+    for _ in range(20):
+        samples = rng.uniform(0.0, 640.0, (300, 2))
+        starts, ends = rng.uniform(250.0, 330.0, (2, 36, 2, 2))  # 36 candidates of 2 moving segments
+        fixed = _nearest_squared(samples, *rng.uniform(0.0, 640.0, (2, 1, 6, 2)))[0]
+        reached = _may_come_nearer(samples, starts, ends, fixed)
+        assert np.all(_nearest_squared(samples, starts, ends)[:, ~reached] >= fixed[~reached])
+        skipped += int((~reached).sum())
+    assert skipped > 20 * 100
+
+
+def test_the_swivel_candidates_axis_values_skipping_samples_equal_those_computing_all(human, rng, monkeypatch):
+    silhouette_q = random_human_configuration(human, rng, spread=0.3)
+    axis = SilhouetteAxisTask(human, [view for _, _, view in _axis_views(human, silhouette_q)])
+    positions = np.repeat(Configuration(human.model, silhouette_q).frame_positions(axis.frame_ids)[None], 36, axis=0)
+    row = int(np.flatnonzero(axis.frame_ids == human.frame_id("LElbow"))[0])
+    positions[:, row] += rng.normal(0.0, 0.05, (36, 3))
+    kept = []
+    monkeypatch.setattr(silhouette_axis, "_may_come_nearer", lambda *args: kept.append(_may_come_nearer(*args))
+                        or kept[-1])
+    skipping = axis.values_at(positions, moved=np.array([row]))
+    assert sum(int((~reached).sum()) for reached in kept) > 0
+    monkeypatch.setattr(silhouette_axis, "_may_come_nearer", lambda samples, *_: np.ones(len(samples), dtype=bool))
+    assert np.array_equal(skipping, axis.values_at(positions, moved=np.array([row])))

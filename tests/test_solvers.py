@@ -1,3 +1,5 @@
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -15,6 +17,7 @@ from ibik_pin.solvers import (
     StepAdaptation,
     make_solver,
 )
+from ibik_pin.solvers.base import build_levels, report_levels, vector_norm
 from ibik_pin.tasks import FramePositionTask, GradientTask, PostureTask
 from tests.conftest import random_human_configuration
 
@@ -416,3 +419,30 @@ def test_a_gradient_task_holds_no_solver_state_and_each_solver_adapts_its_own_st
     assert qp.step_adaptation.step_size(criterion) == criterion.max_step_size
     stack.solve(configuration, [[wrist], [criterion]], iterations=1)  # a new solve starts afresh
     assert stack.step_adaptation.step_size(criterion) == criterion.max_step_size
+
+
+def test_the_solvers_vector_norm_is_numpys_to_the_bit():
+    rng = np.random.default_rng(12)
+    for size in (1, 3, 8, 44, 1000):
+        for scale in (1e-12, 1.0, 1e8):
+            vector = rng.normal(size=size) * scale
+            assert vector_norm(vector) == np.linalg.norm(vector)
+    assert vector_norm(np.zeros(5)) == 0.0
+
+
+@pytest.mark.parametrize("name", ["stack", "qp"])
+def test_a_steps_reports_read_later_are_those_of_the_step(human, rng, name):
+    """The reports are computed when first read; from the step's own dq and levels, whatever
+    happens to the returned dq or the configuration afterwards."""
+    solver = make_solver(name, limits=JointLimits(human.model))
+    configuration = Configuration(human.model, random_human_configuration(human, rng))
+    levels = [[FramePositionTask(human.model, human.keypoints[keypoint], rng.normal(0.0, 0.4, 3) + [0.0, 1.0, 0.0])]
+              for keypoint in ("LWrist", "RAnkle")]
+    levels.append([PostureTask(human.model)])
+    step = solver.compute_step(configuration, levels)
+    expected = report_levels(build_levels(configuration, levels, StepAdaptation()), step.dq)
+    step.dq[:] = 0.0
+    configuration.update(random_human_configuration(human, rng))
+    assert step.levels is step.levels
+    np.testing.assert_equal([dataclasses.astuple(report) for report in step.levels],  # NaN values equal
+                            [dataclasses.astuple(report) for report in expected])

@@ -6,8 +6,9 @@ import cv2
 import numpy as np
 import pytest
 
+from ibik_pin.vision.distance import distance_to_background, signed_distance
 from ibik_pin.vision.medial_axis import medial_axis_pixels
-from ibik_pin.vision.support import _signed_distance, distance_to_background
+from ibik_pin.vision.support import SupportImage, support_from_mask
 
 
 def random_silhouettes(seed: int, count: int, size=(120, 160)):
@@ -24,7 +25,7 @@ def random_silhouettes(seed: int, count: int, size=(120, 160)):
             yield mask
 
 
-def whole_frame_signed_distance(mask: np.ndarray) -> np.ndarray:
+def whole_framesigned_distance(mask: np.ndarray) -> np.ndarray:
     mask_u8 = mask.astype(np.uint8)
     inside, outside = distance_to_background(mask_u8), distance_to_background(1 - mask_u8)
     return np.where(mask.astype(bool), inside - 0.5, 0.5 - outside).astype(np.float32)
@@ -34,7 +35,7 @@ def test_the_signed_distance_from_the_bounding_box_equals_the_whole_frames():
     masks = list(random_silhouettes(seed=3, count=150))
     assert len(masks) > 100
     for mask in masks:
-        assert np.array_equal(_signed_distance(mask.astype(bool)), whole_frame_signed_distance(mask))
+        assert np.array_equal(signed_distance(mask.astype(bool)), whole_framesigned_distance(mask))
 
 
 def test_the_exact_distance_does_not_depend_on_the_part_of_the_image_transformed():
@@ -73,3 +74,43 @@ def test_the_float32_rounding_equals_the_float64_one_up_to_the_largest_frame():
         raw = cv2.distanceTransform(image, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
         expected = np.sqrt(np.rint(np.square(raw, dtype=np.float64))).astype(np.float32)
         assert np.array_equal(distance_to_background(image), expected)
+
+
+def whole_frame_support(mask: np.ndarray, inside_cap_px: float, smooth_sigma_px: float) -> np.ndarray:
+    values = np.minimum(whole_framesigned_distance(mask), np.float32(inside_cap_px))
+    if smooth_sigma_px == 0.0:
+        return values
+    return cv2.GaussianBlur(values, (0, 0), sigmaX=smooth_sigma_px, sigmaY=smooth_sigma_px,
+                            borderType=cv2.BORDER_REPLICATE)
+
+
+@pytest.mark.parametrize(("size", "smooth_sigma_px"), [((480, 640), 1.0), ((301, 517), 2.0), ((240, 330), 0.0)])
+def test_a_support_read_on_its_window_around_the_silhouette_equals_the_whole_frames(size, smooth_sigma_px):
+    """Samples near the body are read on the window, others on the whole frame computed then; both
+    give the whole frame's values to the bit (frames whose width is no multiple of the blur's
+    column alignment, silhouettes cut by the frame's edges)."""
+    rng = np.random.default_rng(8)
+    windowed = 0
+    for mask in random_silhouettes(seed=9, count=40, size=size):
+        support = support_from_mask(mask, inside_cap_px=4.0, smooth_sigma_px=smooth_sigma_px)
+        reference = SupportImage(whole_frame_support(mask, 4.0, smooth_sigma_px))
+        rows, columns = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+        near = np.column_stack([rng.uniform(columns[0] - 20, columns[-1] + 20, 200),
+                                rng.uniform(rows[0] - 20, rows[-1] + 20, 200)])
+        far = np.column_stack([rng.uniform(-50, size[1] + 50, 200), rng.uniform(-50, size[0] + 50, 200)])
+        for pixels in (near, far):
+            sample, expected = support.sample(pixels), reference.sample(pixels)
+            assert np.array_equal(sample.values, expected.values)
+            assert np.array_equal(sample.gradient, expected.gradient)
+            windowed += pixels is near and support._values is None
+        assert np.array_equal(support.values, reference.values)
+    assert windowed > 20
+
+
+def test_a_windowed_support_reads_no_pixels_as_the_whole_frame_does():
+    mask = np.zeros((480, 640), bool)
+    mask[100:200, 300:360] = True
+    windowed, whole = support_from_mask(mask), SupportImage(support_from_mask(mask).values)
+    sample, expected = windowed.sample(np.zeros((0, 2))), whole.sample(np.zeros((0, 2)))
+    assert sample.values.shape == (0,) and sample.gradient.shape == (0, 2)
+    assert np.array_equal(sample.values, expected.values) and np.array_equal(sample.gradient, expected.gradient)

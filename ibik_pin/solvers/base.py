@@ -12,8 +12,9 @@ the adaptation of its image steps (:class:`~ibik_pin.solvers.step_adaptation.Ste
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
-from collections.abc import Sequence, Set
+from collections.abc import Callable, Sequence, Set
 from dataclasses import dataclass, field
 from typing import cast
 
@@ -34,6 +35,12 @@ Levels = Sequence[Sequence[Task | GradientTask]]
 # 1e-3 lets the first steps blow up to tens of radians; 3e-2 converges on whole-body targets in a
 # few steps.
 DEFAULT_DAMPING = 3e-2
+
+
+def vector_norm(vector: np.ndarray) -> float:
+    """|v|, the same float as np.linalg.norm (the square root of v.v) without its wrapper's
+    microseconds, which add up over the several norms of every step."""
+    return math.sqrt(vector.dot(vector))
 
 
 @dataclass
@@ -84,10 +91,22 @@ class LevelReport:
     status: str
 
 
-@dataclass
 class StepResult:
-    dq: np.ndarray  # (nv,)
-    levels: list[LevelReport]
+    """One step: dq (nv,) and the report of every level.
+
+    The reports may be given as a function that computes them, called when they are first read: a
+    solve reads its last step's only, and a report costs a residual per level.
+    """
+
+    def __init__(self, dq: np.ndarray, levels: list[LevelReport] | Callable[[], list[LevelReport]]) -> None:
+        self.dq = dq
+        self._levels = levels
+
+    @property
+    def levels(self) -> list[LevelReport]:
+        if callable(self._levels):
+            self._levels = self._levels()
+        return self._levels
 
 
 @dataclass
@@ -157,7 +176,7 @@ def build_levels(configuration: Configuration, levels: Levels, adaptation: StepA
 def least_squares_status(residual: float, b: np.ndarray) -> str:
     """"solved" when the residual is small next to the requested change (damping alone leaves
     lambda^2 / (sigma^2 + lambda^2) of it), else "relaxed"."""
-    return "solved" if residual <= 1e-6 + 0.05 * np.linalg.norm(b) else "relaxed"
+    return "solved" if residual <= 1e-6 + 0.05 * vector_norm(b) else "relaxed"
 
 
 def report_levels(built: list, dq: np.ndarray, failed: Set[int] = frozenset()) -> list[LevelReport]:
@@ -170,7 +189,7 @@ def report_levels(built: list, dq: np.ndarray, failed: Set[int] = frozenset()) -
             status = "failed" if index in failed else ("empty" if level.step_size == 0 else "solved")
             reports.append(LevelReport("gradient", float("nan"), level.value, status))
         else:
-            residual = float(np.linalg.norm(level.A @ dq - level.b))
+            residual = vector_norm(level.A @ dq - level.b)
             status = "failed" if index in failed else least_squares_status(residual, level.b)
             reports.append(LevelReport("tasks", residual, float("nan"), status))
     return reports
@@ -245,7 +264,7 @@ class Solver(ABC):
             if self.limits is not None:
                 q = self.limits.clamp(q)
             configuration.update(q)
-            step_norms.append(float(np.linalg.norm(step.dq)))
+            step_norms.append(vector_norm(step.dq))
             if tolerance is not None and step_norms[-1] < tolerance:
                 break
         violation = float("nan") if self.limits is None else self.limits.violation(configuration.q)

@@ -24,6 +24,7 @@ skips that level (reported "failed"), never raises.
 
 from __future__ import annotations
 
+import functools
 from typing import cast
 
 import numpy as np
@@ -106,7 +107,7 @@ class HierarchicalQPSolver(Solver):
             lower, upper = self.limits.step_bounds(configuration.q)
         else:
             lower, upper = np.full(nv, -UNBOUNDED), np.full(nv, UNBOUNDED)
-        dq = np.clip(np.zeros(nv), lower, upper)
+        dq = np.zeros(nv).clip(lower, upper)
         null_basis = np.eye(nv)
         failed: set[int] = set()
         for index, level in enumerate(built):
@@ -118,7 +119,7 @@ class HierarchicalQPSolver(Solver):
                 continue
             unconstrained, remaining = step
             candidate = dq + null_basis @ unconstrained
-            if np.all(candidate >= lower) and np.all(candidate <= upper):
+            if (candidate >= lower).all() and (candidate <= upper).all():
                 w = unconstrained  # no bound active: the QP's optimum is the projection stack's step
             else:
                 if isinstance(level, GradientLevel):
@@ -137,9 +138,9 @@ class HierarchicalQPSolver(Solver):
                     failed.add(index)
                     continue
             # proxsuite meets the bounds to eps_abs; clip so the limits hold exactly.
-            dq = np.clip(dq + null_basis @ w, lower, upper)
+            dq = (dq + null_basis @ w).clip(lower, upper)
             null_basis = null_basis @ remaining
-        return StepResult(dq, report_levels(built, dq, failed))
+        return StepResult(dq, functools.partial(report_levels, built, dq.copy(), failed))
 
     def _solve_level(self, index, hessian, linear, constraint, lower, upper) -> np.ndarray | None:
         """proxsuite solve of min 1/2 w'Hw + g'w s.t. lower <= C w <= upper; None if it failed.

@@ -10,7 +10,7 @@ import numpy as np
 from scipy.linalg import lapack
 
 from ibik_pin.exceptions import SolverError
-from ibik_pin.solvers.base import GradientLevel
+from ibik_pin.solvers.base import GradientLevel, vector_norm
 
 # Singular values below RANK_TOLERANCE * max(1, sigma_max) count as zero for the null space: small
 # enough that lower levels leak < 1e-8 into higher ones, while damping keeps the steps bounded.
@@ -46,7 +46,7 @@ def damped_solve(
     if info != 0:
         raise SolverError(f"the SVD of a level's projected Jacobian {projected.shape} failed: LAPACK's gesdd "
                           f"returned {info}")
-    rank = int(np.sum(sigma > RANK_TOLERANCE * max(1.0, sigma[0] if sigma.size else 0.0)))
+    rank = np.count_nonzero(sigma > RANK_TOLERANCE * max(1.0, sigma[0] if sigma.size else 0.0))
     damped = sigma[:rank] / (sigma[:rank] ** 2 + damping**2)
     w = vt[:rank].T @ (damped * (u[:, :rank].T @ residual))
     return w, vt[rank:].T
@@ -54,7 +54,7 @@ def damped_solve(
 
 def remove_direction(reduced: np.ndarray) -> np.ndarray:
     """Orthonormal basis of the complement of one direction, shape (r, r - 1) (or (r, r) if zero)."""
-    norm = np.linalg.norm(reduced)
+    norm = vector_norm(reduced)
     if norm <= RANK_TOLERANCE:
         return np.eye(reduced.size)
     _, _, vt, _ = _svd(reduced[None, :] / norm)
@@ -64,7 +64,7 @@ def remove_direction(reduced: np.ndarray) -> np.ndarray:
 def unit_reduced_direction(null_basis: np.ndarray, direction: np.ndarray) -> np.ndarray | None:
     """Z^T g / |Z^T g|: a gradient in null-space coordinates, of unit norm; None if it vanishes."""
     reduced = null_basis.T @ direction
-    norm = np.linalg.norm(reduced)
+    norm = vector_norm(reduced)
     return None if norm <= RANK_TOLERANCE else reduced / norm
 
 

@@ -16,6 +16,8 @@ gradient level merged into one primary task, then (Liegeois only) the gradient l
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from ibik_pin.configuration import Configuration
@@ -42,7 +44,7 @@ class PriorityStackSolver(Solver):
         nv = configuration.nv
         if self.limits is None:
             dq = self._project(built, np.zeros(nv), np.eye(nv))
-            return StepResult(dq, report_levels(built, dq))
+            return StepResult(dq, functools.partial(report_levels, built, dq.copy()))
         # Joint limits by clamping (Baerlocher & Boulic 2004): a coordinate whose step leaves its
         # bounds is locked on the bound and taken out of every level, and the stack is solved again.
         lower, upper = self.limits.step_bounds(configuration.q)
@@ -56,7 +58,7 @@ class PriorityStackSolver(Solver):
             fixed[leaving] = np.clip(dq[leaving], lower[leaving], upper[leaving])
             locked |= leaving
         dq = np.clip(dq, lower, upper)
-        return StepResult(dq, report_levels(built, dq))
+        return StepResult(dq, functools.partial(report_levels, built, dq.copy()))
 
     def _project(self, built: list, dq: np.ndarray, null_basis: np.ndarray) -> np.ndarray:
         """The recursive stack from a partial step dq over the coordinates spanned by null_basis."""

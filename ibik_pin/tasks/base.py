@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 
 import numpy as np
@@ -57,7 +58,7 @@ class Task(ABC):
         Returns:
             A = sqrt(weight) J, shape (m, nv); b = -sqrt(weight) gain e, shape (m,).
         """
-        scale = np.sqrt(self.weight)
+        scale = math.sqrt(self.weight)  # np.sqrt's value, as a Python float: a step builds many tasks' rows
         return (
             scale * self.compute_jacobian(configuration),
             -scale * self.gain * self.compute_error(configuration),

@@ -124,7 +124,7 @@ class ImageTask(SegmentCriterion):
             pixels, projection_jacobian, depth = view.camera.project_with_jacobian(points)
             support, support_gradient = view.support.sample(pixels)
             in_front = depth > 1e-6
-            value += np.mean(np.where(in_front, support, 0.0))
+            value += np.add.reduce(np.where(in_front, support, 0.0)) / len(points)  # np.mean's sum and division
             contribution = np.einsum("mi,mij->mj", support_gradient, projection_jacobian)
             gradient_points += np.where(in_front[:, None], contribution, 0.0)
         count = max(len(self._active_views), 1)
@@ -148,11 +148,13 @@ class ImageTask(SegmentCriterion):
             changing = np.any(self._interpolation[:, moved] != 0.0, axis=1)
         candidates = frame_positions.shape[0]
         values = np.zeros(candidates)
+        moving = np.einsum("mk,ckd->cmd", self._interpolation[changing], frame_positions)
+        if not changing.all():
+            still = np.einsum("mk,ckd->cmd", self._interpolation[~changing], frame_positions[:1])
         for view in self._active_views:
-            values += self._support_sum(view, np.einsum("mk,ckd->cmd", self._interpolation[changing], frame_positions))
+            values += self._support_sum(view, moving)
             if not changing.all():
-                values += self._support_sum(view, np.einsum("mk,ckd->cmd", self._interpolation[~changing],
-                                                            frame_positions[:1]))
+                values += self._support_sum(view, still)
         return values / (samples * max(len(self._active_views), 1))
 
     @staticmethod

@@ -139,13 +139,16 @@ class SwivelSearch:
     def hints(self, configuration: Configuration, free: Sequence[str]) -> dict[str, np.ndarray]:
         """Better positions [m] of the free middle joints (those among LIMB_ENDS), by name."""
         hints: dict[str, np.ndarray] = {}
-        for name in free:
-            if name not in LIMB_ENDS or name not in self.body.keypoints:
-                continue
-            root_name, end_name = LIMB_ENDS[name]
-            ids = self.body.frame_ids([root_name, name, end_name])
+        limbs = [name for name in free if name in LIMB_ENDS and name in self.body.keypoints]
+        limb_ids = [self.body.frame_ids([LIMB_ENDS[name][0], name, LIMB_ENDS[name][1]]) for name in limbs]
+        # Every limb's two ends read in the silhouettes at once (a projection per view, not per limb).
+        ends_inside = np.ones((len(limbs), 2), dtype=bool)
+        if self.inside_silhouettes is not None and limbs:
+            ends = np.array([configuration.frame_positions(ids[[0, 2]]) for ids in limb_ids]).reshape(-1, 3)
+            ends_inside = self.inside_silhouettes(ends).reshape(-1, 2)
+        for name, ids, inside in zip(limbs, limb_ids, ends_inside, strict=True):
             root, middle, end = configuration.frame_positions(ids)
-            if self.inside_silhouettes is not None and not self.inside_silhouettes(np.array([root, end])).all():
+            if not inside.all():
                 continue
             if _distance_to_line(middle, root, end) < self.min_radius:
                 continue

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from ibik_pin.exceptions import InputError
-from ibik_pin.vision.support import box_around, distance_to_background
+from ibik_pin.vision.distance import box_around, distance_to_background
 
 __all__ = ["medial_axis_pixels"]
 

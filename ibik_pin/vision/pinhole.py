@@ -7,7 +7,7 @@ place; the conventions and the interface it shares with the orthographic camera 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -43,6 +43,7 @@ class PinholeCamera(Camera):
     distortion: np.ndarray
     rotation: np.ndarray
     translation: np.ndarray
+    _distortion_terms: tuple[float, float, float, float, float] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         self._validate_placement()
@@ -56,6 +57,8 @@ class PinholeCamera(Camera):
             raise InputError(f"intrinsics: expected zero skew K[0, 1] (OpenCV's model), found {K[0, 1]}")
         object.__setattr__(self, "intrinsics", _read_only(K))
         object.__setattr__(self, "distortion", _read_only(as_finite_array(self.distortion, [(4,), (5,)], "distortion")))
+        # The coefficients as Python floats, read at every projection (the same products as numpy's scalars).
+        object.__setattr__(self, "_distortion_terms", tuple(float(term) for term in self._coefficients()))
 
     @classmethod
     def from_rodrigues(
@@ -84,8 +87,11 @@ class PinholeCamera(Camera):
         """Normalised coordinates x = X/Z, y = Y/Z, depth Z [m] and 1/Z of world points (N, 3)."""
         points_camera = self.points_camera(points_world)
         depth = points_camera[:, 2]
-        with np.errstate(divide="ignore"):  # a point on the focal plane goes to infinity
+        if depth.all():
             inverse_depth = 1.0 / depth
+        else:
+            with np.errstate(divide="ignore"):  # a point on the focal plane goes to infinity
+                inverse_depth = 1.0 / depth
         return points_camera[:, 0] * inverse_depth, points_camera[:, 1] * inverse_depth, depth, inverse_depth
 
     def project(self, points_world: np.ndarray) -> np.ndarray:
@@ -95,7 +101,7 @@ class PinholeCamera(Camera):
         ``cv2.projectPoints``; :meth:`project_with_jacobian` also returns the depth.
         """
         x, y, _, _ = self._normalized(points_world)
-        k1, k2, p1, p2, k3 = self._coefficients()
+        k1, k2, p1, p2, k3 = self._distortion_terms
         r2 = x * x + y * y
         radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
         xy = x * y
@@ -116,7 +122,7 @@ class PinholeCamera(Camera):
             :class:`Projection` with pixels (N, 2) [px], jacobian (N, 2, 3) [px/m], depth (N,) [m].
         """
         x, y, depth, inverse_depth = self._normalized(points_world)
-        k1, k2, p1, p2, k3 = self._coefficients()
+        k1, k2, p1, p2, k3 = self._distortion_terms
         r2 = x * x + y * y
         radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
         radial_slope = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)  # d radial / d r^2

@@ -10,15 +10,18 @@ column j) is at ``u = j, v = i``.
 
 from __future__ import annotations
 
+import functools
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import NamedTuple, Protocol
+from typing import NamedTuple, Protocol, cast
 
 import cv2
 import numpy as np
 
 from ibik_pin.checks import as_mask
 from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
+from ibik_pin.vision.distance import box_around, shifted, signed_distance
 
 
 class SupportSample(NamedTuple):
@@ -57,28 +60,29 @@ def _as_pixels(pixels) -> np.ndarray:
     pixels = np.asarray(pixels, dtype=np.float64)
     if pixels.ndim != 2 or pixels.shape[1] != 2:
         raise InputError(f"pixels: expected an array of shape (N, 2) [px], found shape {pixels.shape}")
-    nan_rows = np.isnan(pixels).any(axis=1)
-    if nan_rows.any():  # infinite coordinates are fine: clamped to the border
+    if np.isnan(pixels).any():  # infinite coordinates are fine: clamped to the border
+        nan_rows = np.isnan(pixels).any(axis=1)
         raise InputError(f"pixels: expected coordinates that are not NaN, found {int(nan_rows.sum())} row(s) with NaN")
     return pixels
 
 
 
-@dataclass(frozen=True, eq=False)
 class SupportImage:
     """A support image of one view and whether the image term uses it.
+
+    A support built from a silhouette (:func:`support_from_mask`) may hold its values on a window
+    around the body only: samples inside it, nearly all of them while tracking, are read there, and
+    the whole frame is computed the first time something reads outside it (the same values).
 
     Attributes:
         values: (H, W) float32 support [support units], read-only.
         enabled: False when the view has no usable silhouette (empty mask): the image term
             skips the view.
+        size: (width, height) [px].
     """
 
-    values: np.ndarray
-    enabled: bool = True
-
-    def __post_init__(self) -> None:
-        values = np.asarray(self.values)
+    def __init__(self, values, enabled: bool = True) -> None:
+        values = np.asarray(values)
         if values.ndim != 2 or values.shape[0] < 1 or values.shape[1] < 1:
             raise InputError(f"values: expected a non-empty (H, W) array, found shape {values.shape}")
         if not np.issubdtype(values.dtype, np.number) or np.issubdtype(values.dtype, np.complexfloating):
@@ -87,13 +91,45 @@ class SupportImage:
         if not np.all(np.isfinite(values)):
             raise InputError("values: expected finite support values, found NaN or infinity")
         values.setflags(write=False)
-        object.__setattr__(self, "values", values)
-        object.__setattr__(self, "enabled", bool(self.enabled))
+        self._values: np.ndarray | None = values
+        self._enabled = bool(enabled)
+        self._set_size((values.shape[1], values.shape[0]))
+        self._window: _Window | None = None
+        self._whole_frame: Callable[[], np.ndarray] | None = None
+
+    @classmethod
+    def _windowed(cls, window: _Window, size: tuple[int, int], whole_frame: Callable[[], np.ndarray]) -> SupportImage:
+        """An enabled support known on `window`, the whole frame from `whole_frame()` when needed."""
+        support = cls.__new__(cls)
+        support._values = None
+        support._enabled = True
+        support._set_size(size)
+        support._window = window
+        support._whole_frame = whole_frame
+        return support
+
+    def _set_size(self, size: tuple[int, int]) -> None:
+        width, height = size
+        self._size = size
+        self._last_pixel = np.array([[width - 1.0], [height - 1.0]])  # (2, 1) [px]
+        self._last_cell = np.array([[max(width - 2, 0)], [max(height - 2, 0)]])  # where the last cells start
+
+    @property
+    def values(self) -> np.ndarray:
+        if self._values is None:
+            values = cast(Callable[[], np.ndarray], self._whole_frame)()
+            values.setflags(write=False)
+            self._values, self._whole_frame = values, None  # the mask it was computed from let go
+        return self._values
+
+    @property
+    def enabled(self) -> bool:
+        return self._enabled
 
     @property
     def size(self) -> tuple[int, int]:
         """(width, height) [px]."""
-        return self.values.shape[1], self.values.shape[0]
+        return self._size
 
     def __add__(self, other: SupportImage) -> SupportImage:
         """Pixel-wise sum, e.g. a silhouette support plus an :func:`obstacle_support`.
@@ -103,7 +139,7 @@ class SupportImage:
         """
         if not isinstance(other, SupportImage):
             return NotImplemented
-        if other.values.shape != self.values.shape:
+        if other.size != self.size:
             raise InputError(
                 f"other: expected a support image of size (w, h) = {self.size}, found {other.size}"
             )
@@ -112,7 +148,7 @@ class SupportImage:
     def sample_mask(self, pixels: np.ndarray) -> np.ndarray:
         """(N,) True for pixels (N, 2) [px] inside the image (0 <= u <= W - 1, 0 <= v <= H - 1)."""
         pixels = _as_pixels(pixels)
-        height, width = self.values.shape
+        width, height = self.size
         u, v = pixels[:, 0], pixels[:, 1]
         return (u >= 0.0) & (u <= width - 1) & (v >= 0.0) & (v <= height - 1)
 
@@ -131,34 +167,36 @@ class SupportImage:
             :class:`SupportSample` with values (N,) and gradient (N, 2) d values / d (u, v).
         """
         pixels = _as_pixels(pixels)
-        height, width = self.values.shape
-        u = np.clip(pixels[:, 0], 0.0, width - 1)
-        v = np.clip(pixels[:, 1], 0.0, height - 1)
+        width, height = self.size
+        # Rows u and v of (2, N) arrays, each contiguous: few numpy calls (a sample is a few
+        # microseconds per call), each on contiguous rows.
+        clipped = np.minimum(np.maximum(pixels.T, 0.0, order="C"), self._last_pixel)
         # Cell corner (column0, row0); on the last column/row use the cell to its left/above,
         # so that u = W - 1 interpolates with weight 1 on the last pixel.
-        column0 = np.minimum(u.astype(np.intp), max(width - 2, 0))
-        row0 = np.minimum(v.astype(np.intp), max(height - 2, 0))
-        fraction_u = u - column0
-        fraction_v = v - row0
-        # The four corners in one gather: top left, top right, bottom left, bottom right (a
-        # one-pixel-wide or -high image repeats its column or row).
-        top_left_index = row0 * width + column0
-        corners = np.empty((4, pixels.shape[0]), dtype=np.intp)
-        corners[0] = top_left_index
-        corners[1] = top_left_index + min(width - 1, 1)
-        corners[2] = top_left_index + min(height - 1, 1) * width
-        corners[3] = corners[2] + min(width - 1, 1)
-        top_left, top_right, bottom_left, bottom_right = self.values.ravel().take(corners).astype(np.float64)
-        top = top_left + fraction_u * (top_right - top_left)
-        bottom = bottom_left + fraction_u * (bottom_right - bottom_left)
+        cell = np.minimum(clipped.astype(np.intp), self._last_cell)
+        fraction_u, fraction_v = clipped - cell
+        # Offsets of the right and lower corners (a one-pixel-wide or -high image repeats its
+        # column or row).
+        right, down = min(width - 1, 1), min(height - 1, 1)
+        window = self._window
+        if window is not None and window.holds(cell, right, down):
+            values, stride = window.values, window.values.shape[1]
+            origin = window.row * stride + window.column  # the window's first pixel in the frame
+        else:
+            values, stride, origin = self.values, width, 0
+        # The four corners in one gather: top left, bottom left, top right, bottom right.
+        offsets = np.array([[-origin], [down * stride - origin], [right - origin], [down * stride + right - origin]])
+        corners = values.ravel().take(cell[1] * stride + cell[0] + offsets).astype(np.float64)
+        across = corners[2:] - corners[:2]  # top right - top left, bottom right - bottom left
+        top, bottom = corners[:2] + fraction_u * across
         values = top + fraction_v * (bottom - top)
-        gradient = np.empty((pixels.shape[0], 2))
-        gradient[:, 0] = (1.0 - fraction_v) * (top_right - top_left) + fraction_v * (bottom_right - bottom_left)
-        gradient[:, 1] = bottom - top
+        gradient = np.empty((2, pixels.shape[0]))
+        np.multiply(1.0 - fraction_v, across[0], out=gradient[0])
+        gradient[0] += fraction_v * across[1]
+        np.subtract(bottom, top, out=gradient[1])
         # Zero along an axis where the clip moved the point (outside the image).
-        gradient[:, 0] *= u == pixels[:, 0]
-        gradient[:, 1] *= v == pixels[:, 1]
-        return SupportSample(values, gradient)
+        gradient *= clipped == pixels.T
+        return SupportSample(values, gradient.T)
 
 
 
@@ -169,54 +207,6 @@ def _positive_or_none(value, name: str) -> float | None:
     if not np.isfinite(value) or value <= 0.0:
         raise InputError(f"{name}: expected a positive number of pixels or None, found {value}")
     return value
-
-
-
-def _signed_distance(mask: np.ndarray) -> np.ndarray:
-    """(H, W) float32 signed Euclidean distance [px] to the mask's border, positive inside.
-
-    The border is taken halfway between a set and an unset pixel, hence the 0.5 shifts: the
-    distance then grows by 1 px per pixel across the border as well. The image edge is no
-    border (a body cut by the frame continues outside it). Needs both set and unset pixels.
-    """
-    mask_u8 = mask.astype(np.uint8)
-    # The inside distance only within the silhouette's bounding box grown by one pixel (the same
-    # values: every pixel of that ring is background, so no nearer border lies beyond it), which on
-    # a person in a 640 x 480 frame is a tenth of the pixels; the outside distance needs them all.
-    box = box_around(mask, margin_px=1)
-    inside = distance_to_background(mask_u8[box])
-    values = distance_to_background(1 - mask_u8)
-    np.subtract(np.float32(0.5), values, out=values)  # outside: 0.5 - distance
-    values[box] = np.where(mask[box], inside - np.float32(0.5), values[box])
-    return values
-
-
-def distance_to_background(image: np.ndarray) -> np.ndarray:
-    """(H, W) float32 exact Euclidean distance [px] of every pixel to the nearest zero pixel.
-
-    OpenCV's precise transform is exact up to its float arithmetic, whose last bits depend on the
-    image's size; every squared distance between pixels is a whole number, so rounding it makes the
-    result the same whatever part of an image is transformed, and ties (ridges) exact.
-    """
-    try:
-        raw = cv2.distanceTransform(np.ascontiguousarray(image, dtype=np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-    except cv2.error as error:  # pragma: no cover - OpenCV rejects only malformed input, checked above
-        raise InputError(f"mask: OpenCV's distance transform failed: {error}") from None
-    # In place in float32: a square below 2^20 (any 640 x 480 image) is within 0.2 of its whole
-    # number in float32 as in float64, and a float32 square root is the float64 one rounded.
-    np.square(raw, out=raw)
-    np.rint(raw, out=raw)
-    return np.sqrt(raw, out=raw)
-
-
-def box_around(mask: np.ndarray, margin_px: int = 0) -> tuple[slice, slice]:
-    """(rows, columns) slices of the bounding box of a non-empty mask's set pixels, grown by
-    `margin_px` on every side and clipped to the image."""
-    rows = np.flatnonzero(mask.any(axis=1))
-    columns = np.flatnonzero(mask.any(axis=0))
-    height, width = mask.shape
-    return (slice(max(int(rows[0]) - margin_px, 0), min(int(rows[-1]) + margin_px + 1, height)),
-            slice(max(int(columns[0]) - margin_px, 0), min(int(columns[-1]) + margin_px + 1, width)))
 
 
 
@@ -271,15 +261,78 @@ def support_from_mask(
         # No border in the image: every pixel is deep inside.
         inside_value = inside_cap_px if inside_cap_px is not None else float(max(mask.shape))
         return SupportImage(np.full(mask.shape, inside_value, np.float32))
-    values = _signed_distance(mask)
+    box = box_around(mask)
+    support_values = functools.partial(_support_values, mask, box=box, inside_cap_px=inside_cap_px,
+                                       outside_cap_px=outside_cap_px, smooth_sigma_px=smooth_sigma_px)
+    window = _window_around(box, mask.shape, smooth_sigma_px)
+    if window is None:
+        return SupportImage(support_values(None))
+    region, valid = window
+    values = np.ascontiguousarray(support_values(region)[shifted(valid, region)])  # read by flat indices
+    return SupportImage._windowed(_Window(values, valid[0].start, valid[1].start), (mask.shape[1], mask.shape[0]),
+                                  functools.partial(support_values, None))
+
+
+def _support_values(mask: np.ndarray, region: tuple[slice, slice] | None, box: tuple[slice, slice],
+                    inside_cap_px: float | None, outside_cap_px: float | None, smooth_sigma_px: float) -> np.ndarray:
+    """support_from_mask's values on a region holding the silhouette's box (None: the whole frame), (h, w)."""
+    values = signed_distance(mask, region, box)
+    if region is None:
+        region = (slice(0, mask.shape[0]), slice(0, mask.shape[1]))
     if inside_cap_px is not None:
         # Only the box can exceed a positive cap: outside it every value is a negative distance.
-        box = box_around(mask)
-        np.minimum(values[box], inside_cap_px, out=values[box])
+        capped = shifted(box, region)
+        np.minimum(values[capped], inside_cap_px, out=values[capped])
     if outside_cap_px is not None:
         np.maximum(values, -outside_cap_px, out=values)
-    return SupportImage(_smooth(values, smooth_sigma_px))
+    return _smooth(values, smooth_sigma_px)
 
+
+# Where a support is computed: the silhouette's box grown by this margin [px]. Samples of a tracked
+# body fall within it (a sample beyond costs the whole frame once for that view and frame).
+WINDOW_MARGIN_PX = 32
+# OpenCV blurs float images by vectors of columns and the last few columns of a row one by one,
+# which round differently; a window whose columns start on a multiple of this and that is a
+# multiple of it wide (or ends at the frame's edge) is blurred column for column as the frame is.
+_BLUR_COLUMN_ALIGNMENT = 32
+
+
+@dataclass(frozen=True)
+class _Window:
+    """A support's values (h, w) on the part of the frame from (row, column) on."""
+
+    values: np.ndarray
+    row: int
+    column: int
+
+    def holds(self, cells: np.ndarray, right: int, down: int) -> bool:
+        """Whether every pixel cell from corner (column0, row0) (2, N) to (column0 + right,
+        row0 + down) lies within."""
+        height, width = self.values.shape
+        if cells.shape[1] == 0:
+            return True
+        first, last = np.minimum.reduce(cells, axis=1), np.maximum.reduce(cells, axis=1)
+        return bool(first[0] >= self.column and last[0] + right < self.column + width
+                    and first[1] >= self.row and last[1] + down < self.row + height)
+
+
+def _window_around(box: tuple[slice, slice], shape: tuple[int, int],
+                   smooth_sigma_px: float) -> tuple[tuple[slice, slice], tuple[slice, slice]] | None:
+    """The region to compute a support on and the part of it that holds the whole frame's values
+    (the blur near the region's inner edges differs), or None when the region is the whole frame."""
+    height, width = shape
+    # OpenCV's Gaussian kernel on float images reaches round(4 sigma) pixels; one more for safety.
+    blur = int(np.ceil(4.0 * smooth_sigma_px)) + 1 if smooth_sigma_px > 0.0 else 0
+    reach = WINDOW_MARGIN_PX + blur
+    top, bottom = max(box[0].start - reach, 0), min(box[0].stop + reach, height)
+    left = max(box[1].start - reach, 0) // _BLUR_COLUMN_ALIGNMENT * _BLUR_COLUMN_ALIGNMENT
+    columns = box[1].stop + reach - left
+    right = min(left + -(-columns // _BLUR_COLUMN_ALIGNMENT) * _BLUR_COLUMN_ALIGNMENT, width)
+    if (top, bottom, left, right) == (0, height, 0, width):
+        return None
+    valid = (slice(top + (blur if top > 0 else 0), bottom - (blur if bottom < height else 0)),
+             slice(left + (blur if left > 0 else 0), right - (blur if right < width else 0)))
+    return (slice(top, bottom), slice(left, right)), valid
 
 
 def obstacle_support(object_mask: np.ndarray, influence_px: float) -> SupportImage:
@@ -309,7 +362,7 @@ def obstacle_support(object_mask: np.ndarray, influence_px: float) -> SupportIma
         return SupportImage(np.zeros(mask.shape, np.float32))
     if mask.all():
         return SupportImage(np.full(mask.shape, -influence - float(max(mask.shape)), np.float32))
-    distance = -_signed_distance(mask).astype(np.float64)  # positive outside the object
+    distance = -signed_distance(mask).astype(np.float64)  # positive outside the object
     ramp = 1.0 - np.clip(distance, 0.0, influence) / influence
     values = np.where(distance >= 0.0, -influence * ramp * ramp, -influence + 2.0 * distance)
     return SupportImage(values)
