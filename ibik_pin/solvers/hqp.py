@@ -41,7 +41,7 @@ from ibik_pin.solvers.base import (
     build_levels,
     report_levels,
 )
-from ibik_pin.solvers.nullspace import unconstrained_level_step, unit_reduced_direction
+from ibik_pin.solvers.nullspace import FactorMemo, unconstrained_level_step, unit_reduced_direction
 
 UNBOUNDED = 1e20  # proxsuite's stand-in for an infinite bound
 # How far [rad, m] the active-set answer may leave a bound: as proxsuite's, a bound on a coordinate
@@ -82,6 +82,7 @@ class HierarchicalQPSolver(Solver):
         self.max_qp_iterations = int(max_qp_iterations)
         self.active_set = bool(active_set)
         self._qps: dict[tuple[int, int, int], object] = {}  # (level, n, n_in) -> QP
+        self._first_level = FactorMemo()
 
     def _qp(self, level: int, n: int, n_in: int):
         """The QP object of this level and size, created once; returns it and whether it is new."""
@@ -114,7 +115,9 @@ class HierarchicalQPSolver(Solver):
             size = null_basis.shape[1]
             if level is None or size == 0:
                 continue
-            step = unconstrained_level_step(level, null_basis, dq, self.damping)
+            # The first level's matrix, over the whole null space, may come back (the trunk hold).
+            memo = self._first_level if size == nv else None
+            step = unconstrained_level_step(level, null_basis, dq, self.damping, memo)
             if step is None:
                 continue
             unconstrained, remaining = step

@@ -21,14 +21,16 @@ import functools
 import numpy as np
 
 from ibik_pin.configuration import Configuration
+from ibik_pin.limits import JointLimits
 from ibik_pin.solvers.base import (
+    DEFAULT_DAMPING,
     Levels,
     Solver,
     StepResult,
     build_levels,
     report_levels,
 )
-from ibik_pin.solvers.nullspace import unconstrained_level_step
+from ibik_pin.solvers.nullspace import FactorMemo, unconstrained_level_step
 from ibik_pin.tasks.base import GradientTask, Task
 
 
@@ -38,6 +40,10 @@ class PriorityStackSolver(Solver):
     """
 
     name = "stack"
+
+    def __init__(self, *, limits: JointLimits | None = None, damping: float = DEFAULT_DAMPING) -> None:
+        super().__init__(limits=limits, damping=damping)
+        self._first_level = FactorMemo()
 
     def compute_step(self, configuration: Configuration, levels: Levels) -> StepResult:
         built = build_levels(configuration, self.arrange(levels), self.step_adaptation)
@@ -62,10 +68,15 @@ class PriorityStackSolver(Solver):
 
     def _project(self, built: list, dq: np.ndarray, null_basis: np.ndarray) -> np.ndarray:
         """The recursive stack from a partial step dq over the coordinates spanned by null_basis."""
+        first = True
         for level in built:
             if level is None or null_basis.shape[1] == 0:
                 continue
-            step = unconstrained_level_step(level, null_basis, dq, self.damping)
+            # The first level's matrix depends on its rows and the locked joints only: it may come
+            # back (the trunk hold).
+            memo = self._first_level if first else None
+            first = False
+            step = unconstrained_level_step(level, null_basis, dq, self.damping, memo)
             if step is None:
                 continue
             w, remaining = step
