@@ -213,3 +213,25 @@ def test_the_swivel_candidates_axis_values_skipping_samples_equal_those_computin
     assert sum(int((~reached).sum()) for reached in kept) > 0
     monkeypatch.setattr(silhouette_axis, "_may_come_nearer", lambda samples, *_: np.ones(len(samples), dtype=bool))
     assert np.array_equal(skipping, axis.values_at(positions, moved=np.array([row])))
+
+
+def test_values_at_reading_the_pose_equal_those_computing_it_for_every_limb(human, rng):
+    """The swivel search's use: one pose, each limb's middle joint moved in turn, the first
+    candidate a rounding away from the pose (swivel_circle's angle 0)."""
+    silhouette_q = random_human_configuration(human, rng, spread=0.3)
+    views = _axis_views(human, silhouette_q)
+    image = ImageTask(human, [View(camera, support_from_mask(mask, inside_cap_px=4.0)) for camera, mask, _ in views])
+    axis = SilhouetteAxisTask(human, [view for _, _, view in views])
+    q = random_human_configuration(human, rng, spread=0.3)
+    q[:7] = silhouette_q[:7]
+    configuration = Configuration(human.model, q)
+    for task in (image, axis):
+        current = configuration.frame_positions(task.frame_ids)
+        pose = task.at_pose(current)
+        for joint in ("LElbow", "RElbow", "LKnee", "RKnee"):
+            row = np.flatnonzero(task.frame_ids == human.frame_id(joint))
+            positions = np.repeat(current[None], 36, axis=0)
+            positions[:, row[0]] += rng.normal(0.0, 0.05, (36, 3))
+            positions[0, row[0]] = current[row[0]] * (1.0 + 2.0**-52)
+            np.testing.assert_array_equal(task.values_at(positions, moved=row, pose=pose),
+                                          task.values_at(positions, moved=row))  # tolerance 0: the same bits

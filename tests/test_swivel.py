@@ -104,14 +104,17 @@ def test_a_limb_whose_ends_leave_the_silhouettes_is_not_searched(human):
 
 
 class _Towards:
-    """A criterion of the elbow alone: minus its distance to a point [m] (what values_at needs)."""
+    """A criterion of the elbow alone: minus its distance to a point [m] (what the search needs)."""
 
     def __init__(self, human, point):
         self.frame_ids = human.frame_ids(["LElbow"])
         self.point = np.asarray(point)
         self.enabled = True
 
-    def values_at(self, positions, moved=None):
+    def at_pose(self, positions):
+        return None
+
+    def values_at(self, positions, moved=None, pose=None):
         return -np.linalg.norm(positions[:, 0] - self.point, axis=1)
 
 
@@ -155,3 +158,37 @@ def test_views_cross_only_when_two_optical_axes_are_far_from_parallel():
     assert not views_cross([camera(0), camera(210)])
     assert views_cross([camera(0), camera(90)])
     assert views_cross([camera(0), camera(180), camera(250)])
+
+
+def test_the_search_reading_each_term_at_the_pose_gives_the_values_of_one_computing_it(human, monkeypatch):
+    import pinocchio as pin
+
+    q = pin.neutral(human.model)
+    for joint, angle in [("left_shoulder_X", -1.2), ("left_elbow_Z", 1.3), ("right_shoulder_X", 1.0),
+                         ("right_elbow_Z", 1.1), ("left_knee_Z", 0.9), ("right_knee_Z", 0.7)]:
+        q[human.model.joints[human.model.getJointId(joint)].idx_q] = angle
+    image_views, axis_views = _views(human, q)
+    configuration = Configuration(human.model, q)
+    terms = [(ImageTask(human, image_views), 1.0), (SilhouetteAxisTask(human, axis_views), 1.0)]
+    search = SwivelSearch(human, terms, samples=36)
+    limbs = ["LElbow", "RElbow", "LKnee", "RKnee"]
+    values: dict[bool, list] = {True: [], False: []}  # each values_at answer, with and without the pose
+    hints = {}
+    for with_pose in (True, False):
+        for task, _ in terms:
+            plain = type(task).values_at.__get__(task)
+
+            def recorded(positions, moved=None, pose=None, plain=plain, out=values[with_pose]):
+                out.append(plain(positions, moved, pose))
+                return out[-1]
+
+            monkeypatch.setattr(task, "values_at", recorded)
+            if not with_pose:
+                monkeypatch.setattr(task, "at_pose", lambda positions: None)
+        hints[with_pose] = search.hints(configuration, limbs)
+    assert len(values[True]) == 2 * len(limbs)  # every limb searched, by both terms
+    for mine, reference in zip(values[True], values[False], strict=True):
+        np.testing.assert_array_equal(mine, reference)  # tolerance 0: the same bits
+    assert hints[True].keys() == hints[False].keys()
+    for name in hints[True]:
+        np.testing.assert_array_equal(hints[True][name], hints[False][name])

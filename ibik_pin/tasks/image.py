@@ -17,6 +17,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -137,32 +138,42 @@ class ImageTask(SegmentCriterion):
         self._cache_version = configuration.version
         return self._cache
 
-    def values_at(self, frame_positions: np.ndarray, moved: np.ndarray | None = None) -> np.ndarray:
+    def at_pose(self, frame_positions: np.ndarray) -> list[np.ndarray]:
+        """Per view, the support at every sample of the segments placed at `frame_positions` (K, 3)
+        (0 behind the camera), shape (1, M)."""
+        samples = np.einsum("mk,ckd->cmd", self._interpolation, frame_positions[None])
+        return [self._support_values(view, samples) for view in self._active_views]
+
+    def values_at(self, frame_positions: np.ndarray, moved: np.ndarray | None = None,
+                  pose: object | None = None) -> np.ndarray:
         """h for (C, K, 3) placements of the segment ends, shape (C,) (see SegmentCriterion.values_at).
 
-        The samples of the segments that no `moved` row ends are read once, not per candidate.
+        The samples of the segments that no `moved` row ends are read once, not per candidate
+        (read in `pose` when given).
         """
         samples = self._interpolation.shape[0]
         changing = np.ones(samples, dtype=bool)
+        known = cast(list | None, pose) if moved is not None else None
         if moved is not None:
             changing = np.any(self._interpolation[:, moved] != 0.0, axis=1)
         candidates = frame_positions.shape[0]
         values = np.zeros(candidates)
         moving = np.einsum("mk,ckd->cmd", self._interpolation[changing], frame_positions)
-        if not changing.all():
+        if not changing.all() and known is None:
             still = np.einsum("mk,ckd->cmd", self._interpolation[~changing], frame_positions[:1])
-        for view in self._active_views:
-            values += self._support_sum(view, moving)
+        for index, view in enumerate(self._active_views):
+            values += self._support_values(view, moving).sum(axis=1)
             if not changing.all():
-                values += self._support_sum(view, still)
+                values += (self._support_values(view, still) if known is None
+                           else known[index][:, ~changing]).sum(axis=1)
         return values / (samples * max(len(self._active_views), 1))
 
     @staticmethod
-    def _support_sum(view: View, points: np.ndarray) -> np.ndarray:
-        """Sum over samples of the support at (C, M, 3) points [m] (0 behind the camera), shape (C,)."""
+    def _support_values(view: View, points: np.ndarray) -> np.ndarray:
+        """The support at (C, M, 3) points [m] (0 behind the camera), shape (C, M)."""
         pixels, _, depth = view.camera.project_with_jacobian(points.reshape(-1, 3))
         support = np.where(depth > 1e-6, view.support.sample(pixels).values, 0.0)
-        return support.reshape(points.shape[:2]).sum(axis=1)
+        return support.reshape(points.shape[:2])
 
     def inside_silhouettes(self, points: np.ndarray, tolerance_px: float = 2.0) -> np.ndarray:
         """(N,) bool: each world point (N, 3) [m] projects inside the silhouette, or within

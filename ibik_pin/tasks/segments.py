@@ -71,14 +71,22 @@ class SegmentCriterion(GradientTask):
         """The model frames of the segment ends, in the order `values_at` takes them, shape (K,)."""
         return self._frame_ids
 
+    def at_pose(self, frame_positions: np.ndarray) -> object | None:
+        """What `values_at` may reuse for candidates that leave their unmoved rows at these positions
+        (K, 3) (the swivel search tries every free limb of a frame about one pose); None: nothing."""
+        return None
+
     @abstractmethod
-    def values_at(self, frame_positions: np.ndarray, moved: np.ndarray | None = None) -> np.ndarray:
+    def values_at(self, frame_positions: np.ndarray, moved: np.ndarray | None = None,
+                  pose: object | None = None) -> np.ndarray:
         """The criterion for several placements of the segment ends at once (no configuration needed).
 
         Args:
             frame_positions: (C, K, 3) world positions [m] of the frames `frame_ids`, per candidate.
             moved: rows of `frame_ids` whose positions differ between candidates (None: any may);
                 what depends only on the other rows is then computed once, not per candidate.
+            pose: `at_pose` of positions equal to every candidate's outside the `moved` rows (with
+                `moved` only): what depends on those rows alone is read there.
 
         Returns:
             (C,) the criterion of each candidate.

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -122,12 +123,25 @@ class SilhouetteAxisTask(SegmentCriterion):
         self._cache_version = configuration.version
         return self._cache
 
-    def values_at(self, frame_positions: np.ndarray, moved: np.ndarray | None = None) -> np.ndarray:
+    def at_pose(self, frame_positions: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Per view: the ends' pixels (K, 2), whether each is in front (K,), and the squared distance
+        of every axis sample to every segment (S, N) [px^2]."""
+        known = []
+        for view in self._active_views:
+            pixels, _, depth = view.camera.project_with_jacobian(frame_positions)
+            distances = _squared_distances(view.pixels, pixels[None, self._start_index], pixels[None, self._end_index])
+            known.append((pixels, depth > 1e-6, distances[0]))
+        return known
+
+    def values_at(self, frame_positions: np.ndarray, moved: np.ndarray | None = None,
+                  pose: object | None = None) -> np.ndarray:
         """h_axis for (C, K, 3) placements of the segment ends, shape (C,) (see SegmentCriterion.values_at).
 
         The distances to the segments that no `moved` row ends are computed once, not per
-        candidate; a view with an end behind the camera is skipped for that candidate.
+        candidate (read in `pose` when given); a view with an end behind the camera is skipped for
+        that candidate.
         """
+        known = cast(list | None, pose) if moved is not None else None
         candidates = frame_positions.shape[0]
         changing = np.ones(len(self.segments), dtype=bool)
         if moved is not None:
@@ -135,14 +149,17 @@ class SilhouetteAxisTask(SegmentCriterion):
             changing = ((self._start_index[:, None] == moved) | (self._end_index[:, None] == moved)).any(axis=1)
         values = np.zeros(candidates)
         counts = np.zeros(candidates)
-        for view in self._active_views:
-            pixels, visible = _project_candidates(view.camera, frame_positions, moved)
+        for index, view in enumerate(self._active_views):
+            at_pose = None if known is None else known[index]
+            pixels, visible = _project_candidates(view.camera, frame_positions, moved,
+                                                  None if at_pose is None else at_pose[:2])
             starts, ends = pixels[:, self._start_index[changing]], pixels[:, self._end_index[changing]]
             if changing.all():
                 nearest = _nearest_squared(view.pixels, starts, ends)  # (C, N)
             else:
-                fixed = _nearest_squared(view.pixels, pixels[:1, self._start_index[~changing]],
-                                         pixels[:1, self._end_index[~changing]])[0]
+                fixed = (at_pose[2][~changing].min(axis=0) if at_pose is not None else
+                         _nearest_squared(view.pixels, pixels[:1, self._start_index[~changing]],
+                                          pixels[:1, self._end_index[~changing]])[0])
                 # The changing segments only where some candidate may come nearer than the fixed ones:
                 # elsewhere the minimum is the fixed distance, the same value without the work.
                 reached = _may_come_nearer(view.pixels, starts, ends, fixed)
@@ -161,19 +178,22 @@ class SilhouetteAxisTask(SegmentCriterion):
         return self._evaluate(configuration)[1]
 
 
-def _project_candidates(camera: CameraLike, frame_positions: np.ndarray,
-                        moved: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+def _project_candidates(camera: CameraLike, frame_positions: np.ndarray, moved: np.ndarray | None,
+                        shared: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Pixels (C, K, 2) of (C, K, 3) placements and whether each candidate has every end in front
-    of the camera (C,); the rows not `moved` are the same in every candidate, so projected once."""
+    of the camera (C,); the rows not `moved` are the same in every candidate, so projected once
+    (or taken from `shared`: pixels (K, 2) and in front (K,) of a pose with those rows)."""
     candidates, frames = frame_positions.shape[:2]
     if moved is None:
         pixels, _, depth = camera.project_with_jacobian(frame_positions.reshape(-1, 3))
         return pixels.reshape(candidates, frames, 2), np.all(depth.reshape(candidates, frames) > 1e-6, axis=1)
-    shared, _, shared_depth = camera.project_with_jacobian(frame_positions[0])
+    if shared is None:
+        shared_pixels, _, shared_depth = camera.project_with_jacobian(frame_positions[0])
+        shared = shared_pixels, shared_depth > 1e-6
     moving, _, moving_depth = camera.project_with_jacobian(frame_positions[:, moved].reshape(-1, 3))
-    pixels = np.repeat(shared[None], candidates, axis=0)
+    pixels = np.repeat(shared[0][None], candidates, axis=0)
     pixels[:, moved] = moving.reshape(candidates, len(moved), 2)
-    in_front = np.repeat(shared_depth[None] > 1e-6, candidates, axis=0)
+    in_front = np.repeat(shared[1][None], candidates, axis=0)
     in_front[:, moved] = moving_depth.reshape(candidates, len(moved)) > 1e-6
     return pixels, np.all(in_front, axis=1)
 
@@ -247,6 +267,11 @@ def _nearest_squared(samples: np.ndarray, starts: np.ndarray, ends: np.ndarray) 
     """
     if starts.shape[1] == 0:
         return np.full((starts.shape[0], samples.shape[0]), np.inf)
+    return _squared_distances(samples, starts, ends).min(axis=1)
+
+
+def _squared_distances(samples: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """Squared distance [px^2] of each sample (N, 2) to each segment (C, S, 2), shape (C, S, N)."""
     along_u = (ends[..., 0] - starts[..., 0])[..., None]  # (C, S, 1)
     along_v = (ends[..., 1] - starts[..., 1])[..., None]
     length_squared = np.maximum(along_u * along_u + along_v * along_v, 1e-12)
@@ -262,4 +287,4 @@ def _nearest_squared(samples: np.ndarray, starts: np.ndarray, ends: np.ndarray) 
     np.multiply(offset_u, offset_u, out=offset_u)
     np.multiply(offset_v, offset_v, out=offset_v)
     offset_u += offset_v
-    return offset_u.min(axis=1)
+    return offset_u

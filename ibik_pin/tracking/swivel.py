@@ -108,7 +108,8 @@ class SwivelSearch:
     Attributes:
         body: the body model.
         terms: (task, weight) pairs; each task reads the segment ends `frame_ids` and gives
-            `values_at(positions (C, K, 3))` (tasks.segments.SegmentCriterion).
+            `at_pose(positions (K, 3))` and `values_at(positions (C, K, 3), moved, pose)`
+            (tasks.segments.SegmentCriterion).
         samples: points on each circle.
         min_gain: a hint needs a criterion this much above the current pose's, as a fraction of
             the criterion's range over the circle (a flat circle gives no hint).
@@ -146,6 +147,9 @@ class SwivelSearch:
         if self.inside_silhouettes is not None and limbs:
             ends = np.array([configuration.frame_positions(ids[[0, 2]]) for ids in limb_ids]).reshape(-1, 3)
             ends_inside = self.inside_silhouettes(ends).reshape(-1, 2)
+        # Each term at the frame's pose, once for every limb: a limb's candidates move its middle
+        # joint alone, and what the other rows give is read there.
+        poses: dict[int, tuple[np.ndarray, object | None]] = {}
         for name, ids, inside in zip(limbs, limb_ids, ends_inside, strict=True):
             root, middle, end = configuration.frame_positions(ids)
             if not inside.all():
@@ -160,9 +164,13 @@ class SwivelSearch:
                 rows = np.flatnonzero(task.frame_ids == ids[1])
                 if rows.size == 0:
                     continue
-                positions = np.repeat(configuration.frame_positions(task.frame_ids)[None], len(candidates), axis=0)
+                if id(task) not in poses:
+                    current = configuration.frame_positions(task.frame_ids)
+                    poses[id(task)] = current, task.at_pose(current)
+                current, pose = poses[id(task)]
+                positions = np.repeat(current[None], len(candidates), axis=0)
                 positions[:, rows[0]] = candidates
-                term_values.append(weight * task.values_at(positions, moved=rows))
+                term_values.append(weight * task.values_at(positions, moved=rows, pose=pose))
             if not term_values:
                 continue
             values = np.sum(term_values, axis=0)
