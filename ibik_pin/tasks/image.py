@@ -26,6 +26,7 @@ from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.tasks.segments import SegmentCriterion, segment_ends
 from ibik_pin.vision.camera import CameraLike
+from ibik_pin.vision.pinhole import projector
 from ibik_pin.vision.support import SupportImageLike
 
 
@@ -108,6 +109,7 @@ class ImageTask(SegmentCriterion):
                     stacklevel=2,
                 )
         self._active_views = [v for v in self.views if v.support.enabled]
+        self._project = projector([view.camera for view in self._active_views])
         self.enabled = bool(self._active_views)
         self._cache_version = -1
 
@@ -121,8 +123,7 @@ class ImageTask(SegmentCriterion):
         points = self.sample_points(configuration)
         value = 0.0
         gradient_points = np.zeros_like(points)  # dh/dX for every sample, (M, 3)
-        for view in self._active_views:
-            pixels, projection_jacobian, depth = view.camera.project_with_jacobian(points)
+        for view, (pixels, projection_jacobian, depth) in zip(self._active_views, self._project(points), strict=True):
             support, support_gradient = view.support.sample(pixels)
             in_front = depth > 1e-6
             value += np.add.reduce(np.where(in_front, support, 0.0)) / len(points)  # np.mean's sum and division

@@ -36,6 +36,7 @@ from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.tasks.segments import SegmentCriterion, segment_ends
 from ibik_pin.vision.camera import CameraLike
+from ibik_pin.vision.pinhole import projector
 
 __all__ = ["AxisView", "SilhouetteAxisTask"]
 
@@ -93,6 +94,7 @@ class SilhouetteAxisTask(SegmentCriterion):
         """Replace the views (the next frame's axis samples); views without samples are skipped."""
         self.views = list(views)
         self._active_views = [view for view in self.views if len(view.pixels)]
+        self._project = projector([view.camera for view in self._active_views])
         self.enabled = bool(self._active_views)
         self._cache_version = -1
         self._cache: tuple[float, np.ndarray] | None = None
@@ -104,8 +106,8 @@ class SilhouetteAxisTask(SegmentCriterion):
         value = 0.0
         gradient_frames = np.zeros_like(positions)  # dh/dX of each end frame, (K, 3)
         views = 0
-        for view in self._active_views:
-            pixels, projection_jacobian, depth = view.camera.project_with_jacobian(positions)
+        for view, (pixels, projection_jacobian, depth) in zip(self._active_views, self._project(positions),
+                                                              strict=True):
             if not (depth > 1e-6).all():
                 continue  # a segment end behind the camera: its projection means nothing
             views += 1

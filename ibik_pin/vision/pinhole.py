@@ -7,15 +7,17 @@ place; the conventions and the interface it shares with the orthographic camera 
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 
 from ibik_pin.checks import as_finite_array, as_image_size, as_radii
 from ibik_pin.exceptions import InputError
-from ibik_pin.vision.camera import Camera, Projection, _read_only, _rotation_from_rodrigues
+from ibik_pin.vision.camera import Camera, CameraLike, Projection, _as_points, _read_only, _rotation_from_rodrigues
 
-__all__ = ["PinholeCamera", "look_at_camera"]
+__all__ = ["PinholeCamera", "PinholeViews", "look_at_camera", "projector"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -161,6 +163,70 @@ class PinholeCamera(Camera):
         radii = as_radii(radii, depth.shape[0])
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(depth > 0.0, self.focal_px * radii / depth, np.nan)
+
+
+class PinholeViews:
+    """Pinhole cameras that project the same points together: the operations of
+    PinholeCamera.project_with_jacobian, each on an array with the views in front, so that every
+    view's values are its camera's to the bit at the numpy overhead of one camera (a step of the
+    image level projects the same points in every view).
+    """
+
+    def __init__(self, cameras: Sequence[PinholeCamera]) -> None:
+        self.cameras = list(cameras)
+        self._rotations_t = np.stack([camera.rotation for camera in self.cameras]).transpose(0, 2, 1)
+        self._rotations = self._rotations_t.transpose(0, 2, 1)
+        self._translations = np.stack([camera.translation for camera in self.cameras])[:, None]  # (V, 1, 3)
+        terms = np.array([camera._distortion_terms for camera in self.cameras])  # (V, 5)
+        self._k1, self._k2, self._p1, self._p2, self._k3 = (terms[:, [index]] for index in range(5))  # (V, 1)
+        self._fx = np.array([[camera.intrinsics[0, 0]] for camera in self.cameras])
+        self._fy = np.array([[camera.intrinsics[1, 1]] for camera in self.cameras])
+        self._centres = np.stack([camera.intrinsics[:2, 2] for camera in self.cameras])[:, None]  # (V, 1, 2)
+
+    def project_with_jacobian(self, points_world: np.ndarray) -> list[Projection]:
+        """Each camera's :meth:`PinholeCamera.project_with_jacobian` of the points (N, 3)."""
+        points_camera = _as_points(points_world) @ self._rotations_t + self._translations  # (V, N, 3)
+        depth = points_camera[..., 2]
+        if depth.all():
+            inverse_depth = 1.0 / depth
+        else:
+            with np.errstate(divide="ignore"):  # a point on the focal plane goes to infinity
+                inverse_depth = 1.0 / depth
+        x, y = points_camera[..., 0] * inverse_depth, points_camera[..., 1] * inverse_depth
+        k1, k2, p1, p2, k3 = self._k1, self._k2, self._p1, self._p2, self._k3
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        radial_slope = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
+        xy = x * y
+        two_x_x, two_y_y = 2.0 * x * x, 2.0 * y * y
+        x_distorted = x * radial + 2.0 * p1 * xy + p2 * (r2 + two_x_x)
+        y_distorted = y * radial + p1 * (r2 + two_y_y) + 2.0 * p2 * xy
+        dxd_dx = radial + two_x_x * radial_slope + 2.0 * p1 * y + 6.0 * p2 * x
+        dyd_dy = radial + two_y_y * radial_slope + 6.0 * p1 * y + 2.0 * p2 * x
+        cross = 2.0 * xy * radial_slope + 2.0 * p1 * x + 2.0 * p2 * y
+        fx, fy = self._fx, self._fy
+        pixels = np.empty(depth.shape + (2,))
+        np.multiply(fx, x_distorted, out=pixels[..., 0])
+        np.multiply(fy, y_distorted, out=pixels[..., 1])
+        pixels += self._centres
+        jacobian_camera = np.empty(depth.shape + (2, 3))
+        jacobian_camera[..., 0, 0] = fx * dxd_dx * inverse_depth
+        jacobian_camera[..., 0, 1] = fx * cross * inverse_depth
+        jacobian_camera[..., 0, 2] = -fx * (dxd_dx * x + cross * y) * inverse_depth
+        jacobian_camera[..., 1, 0] = fy * cross * inverse_depth
+        jacobian_camera[..., 1, 1] = fy * dyd_dy * inverse_depth
+        jacobian_camera[..., 1, 2] = -fy * (cross * x + dyd_dy * y) * inverse_depth
+        views = len(self.cameras)
+        jacobian = (jacobian_camera.reshape(views, -1, 3) @ self._rotations).reshape(views, -1, 2, 3)
+        return [Projection(pixels[index], jacobian[index], depth[index]) for index in range(views)]
+
+
+def projector(cameras: Sequence[CameraLike]) -> Callable[[np.ndarray], list[Projection]]:
+    """points (N, 3) -> each camera's project_with_jacobian: together when all are pinholes."""
+    cameras = list(cameras)
+    if cameras and all(isinstance(camera, PinholeCamera) for camera in cameras):
+        return PinholeViews(cast(list[PinholeCamera], cameras)).project_with_jacobian
+    return lambda points: [camera.project_with_jacobian(points) for camera in cameras]
 
 
 def look_at_camera(
