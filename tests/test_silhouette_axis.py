@@ -235,3 +235,32 @@ def test_values_at_reading_the_pose_equal_those_computing_it_for_every_limb(huma
             positions[0, row[0]] = current[row[0]] * (1.0 + 2.0**-52)
             np.testing.assert_array_equal(task.values_at(positions, moved=row, pose=pose),
                                           task.values_at(positions, moved=row))  # tolerance 0: the same bits
+
+
+def test_the_terms_projecting_every_view_together_equal_one_camera_at_a_time(human, rng):
+    silhouette_q = random_human_configuration(human, rng, spread=0.3)
+    views = _axis_views(human, silhouette_q)
+    q = random_human_configuration(human, rng, spread=0.3)
+    q[:7] = silhouette_q[:7]
+    answers = []
+    for together in (True, False):
+        image = ImageTask(human, [View(camera, support_from_mask(mask, inside_cap_px=4.0))
+                                  for camera, mask, _ in views])
+        axis = SilhouetteAxisTask(human, [view for _, _, view in views])
+        answer = []
+        for task in (image, axis):
+            if not together:
+                task._project = lambda points, task=task: [view.camera.project_with_jacobian(points)
+                                                           for view in task._active_views]
+            configuration = Configuration(human.model, q)
+            current = configuration.frame_positions(task.frame_ids)
+            row = np.flatnonzero(task.frame_ids == human.frame_id("RElbow"))
+            positions = np.repeat(current[None], 12, axis=0)
+            positions[:, row[0]] += np.random.default_rng(5).normal(0.0, 0.05, (12, 3))
+            answer += [task.compute_value(configuration), task.compute_gradient(configuration),
+                       task.values_at(positions), task.values_at(positions, moved=row),
+                       task.values_at(positions, moved=row, pose=task.at_pose(current))]
+        answer.append(image.inside_silhouettes(current))
+        answers.append(answer)
+    for mine, reference in zip(*answers, strict=True):
+        np.testing.assert_array_equal(mine, reference)  # tolerance 0: the same bits

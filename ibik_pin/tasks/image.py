@@ -142,8 +142,7 @@ class ImageTask(SegmentCriterion):
     def at_pose(self, frame_positions: np.ndarray) -> list[np.ndarray]:
         """Per view, the support at every sample of the segments placed at `frame_positions` (K, 3)
         (0 behind the camera), shape (1, M)."""
-        samples = np.einsum("mk,ckd->cmd", self._interpolation, frame_positions[None])
-        return [self._support_values(view, samples) for view in self._active_views]
+        return self._support_values(np.einsum("mk,ckd->cmd", self._interpolation, frame_positions[None]))
 
     def values_at(self, frame_positions: np.ndarray, moved: np.ndarray | None = None,
                   pose: object | None = None) -> np.ndarray:
@@ -159,30 +158,30 @@ class ImageTask(SegmentCriterion):
             changing = np.any(self._interpolation[:, moved] != 0.0, axis=1)
         candidates = frame_positions.shape[0]
         values = np.zeros(candidates)
-        moving = np.einsum("mk,ckd->cmd", self._interpolation[changing], frame_positions)
-        if not changing.all() and known is None:
-            still = np.einsum("mk,ckd->cmd", self._interpolation[~changing], frame_positions[:1])
-        for index, view in enumerate(self._active_views):
-            values += self._support_values(view, moving).sum(axis=1)
+        moving = self._support_values(np.einsum("mk,ckd->cmd", self._interpolation[changing], frame_positions))
+        if not changing.all():
+            still = ([at_pose[:, ~changing] for at_pose in known] if known is not None else
+                     self._support_values(np.einsum("mk,ckd->cmd", self._interpolation[~changing],
+                                                    frame_positions[:1])))
+        for index in range(len(self._active_views)):
+            values += moving[index].sum(axis=1)
             if not changing.all():
-                values += (self._support_values(view, still) if known is None
-                           else known[index][:, ~changing]).sum(axis=1)
+                values += still[index].sum(axis=1)
         return values / (samples * max(len(self._active_views), 1))
 
-    @staticmethod
-    def _support_values(view: View, points: np.ndarray) -> np.ndarray:
-        """The support at (C, M, 3) points [m] (0 behind the camera), shape (C, M)."""
-        pixels, _, depth = view.camera.project_with_jacobian(points.reshape(-1, 3))
-        support = np.where(depth > 1e-6, view.support.sample(pixels).values, 0.0)
-        return support.reshape(points.shape[:2])
+    def _support_values(self, points: np.ndarray) -> list[np.ndarray]:
+        """Per view, the support at (C, M, 3) points [m] (0 behind the camera), shape (C, M)."""
+        projections = self._project(points.reshape(-1, 3))
+        return [np.where(depth > 1e-6, view.support.sample(pixels).values, 0.0).reshape(points.shape[:2])
+                for view, (pixels, _, depth) in zip(self._active_views, projections, strict=True)]
 
     def inside_silhouettes(self, points: np.ndarray, tolerance_px: float = 2.0) -> np.ndarray:
         """(N,) bool: each world point (N, 3) [m] projects inside the silhouette, or within
         `tolerance_px` of it, in every enabled view (the support is a signed distance, positive
         inside: the silhouette's border is 0)."""
         inside = np.ones(len(points), dtype=bool)
-        for view in self._active_views:
-            pixels, _, depth = view.camera.project_with_jacobian(np.asarray(points, dtype=float))
+        projections = self._project(np.asarray(points, dtype=float))
+        for view, (pixels, _, depth) in zip(self._active_views, projections, strict=True):
             inside &= (depth > 1e-6) & (view.support.sample(pixels).values > -float(tolerance_px))
         return inside
 

@@ -25,7 +25,7 @@ translation Jacobians of the segment's end frames and dpi/dX the projection Jaco
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import cast
 
@@ -35,7 +35,7 @@ from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.tasks.segments import SegmentCriterion, segment_ends
-from ibik_pin.vision.camera import CameraLike
+from ibik_pin.vision.camera import CameraLike, Projection
 from ibik_pin.vision.pinhole import projector
 
 __all__ = ["AxisView", "SilhouetteAxisTask"]
@@ -129,8 +129,7 @@ class SilhouetteAxisTask(SegmentCriterion):
         """Per view: the ends' pixels (K, 2), whether each is in front (K,), and the squared distance
         of every axis sample to every segment (S, N) [px^2]."""
         known = []
-        for view in self._active_views:
-            pixels, _, depth = view.camera.project_with_jacobian(frame_positions)
+        for view, (pixels, _, depth) in zip(self._active_views, self._project(frame_positions), strict=True):
             distances = _squared_distances(view.pixels, pixels[None, self._start_index], pixels[None, self._end_index])
             known.append((pixels, depth > 1e-6, distances[0]))
         return known
@@ -151,10 +150,10 @@ class SilhouetteAxisTask(SegmentCriterion):
             changing = ((self._start_index[:, None] == moved) | (self._end_index[:, None] == moved)).any(axis=1)
         values = np.zeros(candidates)
         counts = np.zeros(candidates)
-        for index, view in enumerate(self._active_views):
+        placed = _project_candidates(self._project, frame_positions, moved,
+                                     None if known is None else [at_pose[:2] for at_pose in known])
+        for index, (view, (pixels, visible)) in enumerate(zip(self._active_views, placed, strict=True)):
             at_pose = None if known is None else known[index]
-            pixels, visible = _project_candidates(view.camera, frame_positions, moved,
-                                                  None if at_pose is None else at_pose[:2])
             starts, ends = pixels[:, self._start_index[changing]], pixels[:, self._end_index[changing]]
             if changing.all():
                 nearest = _nearest_squared(view.pixels, starts, ends)  # (C, N)
@@ -180,24 +179,28 @@ class SilhouetteAxisTask(SegmentCriterion):
         return self._evaluate(configuration)[1]
 
 
-def _project_candidates(camera: CameraLike, frame_positions: np.ndarray, moved: np.ndarray | None,
-                        shared: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Pixels (C, K, 2) of (C, K, 3) placements and whether each candidate has every end in front
-    of the camera (C,); the rows not `moved` are the same in every candidate, so projected once
-    (or taken from `shared`: pixels (K, 2) and in front (K,) of a pose with those rows)."""
+def _project_candidates(project: Callable[[np.ndarray], list[Projection]], frame_positions: np.ndarray,
+                        moved: np.ndarray | None, shared: list[tuple[np.ndarray, np.ndarray]] | None = None
+                        ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per view (`project`: points -> each view's projection), pixels (C, K, 2) of (C, K, 3)
+    placements and whether each candidate has every end in front of the camera (C,); the rows not
+    `moved` are the same in every candidate, so projected once (or taken from `shared`: per view,
+    pixels (K, 2) and in front (K,) of a pose with those rows)."""
     candidates, frames = frame_positions.shape[:2]
     if moved is None:
-        pixels, _, depth = camera.project_with_jacobian(frame_positions.reshape(-1, 3))
-        return pixels.reshape(candidates, frames, 2), np.all(depth.reshape(candidates, frames) > 1e-6, axis=1)
+        return [(pixels.reshape(candidates, frames, 2), np.all(depth.reshape(candidates, frames) > 1e-6, axis=1))
+                for pixels, _, depth in project(frame_positions.reshape(-1, 3))]
     if shared is None:
-        shared_pixels, _, shared_depth = camera.project_with_jacobian(frame_positions[0])
-        shared = shared_pixels, shared_depth > 1e-6
-    moving, _, moving_depth = camera.project_with_jacobian(frame_positions[:, moved].reshape(-1, 3))
-    pixels = np.repeat(shared[0][None], candidates, axis=0)
-    pixels[:, moved] = moving.reshape(candidates, len(moved), 2)
-    in_front = np.repeat(shared[1][None], candidates, axis=0)
-    in_front[:, moved] = moving_depth.reshape(candidates, len(moved)) > 1e-6
-    return pixels, np.all(in_front, axis=1)
+        shared = [(pixels, depth > 1e-6) for pixels, _, depth in project(frame_positions[0])]
+    placed = []
+    for (shared_pixels, shared_in_front), (moving, _, moving_depth) in zip(
+            shared, project(frame_positions[:, moved].reshape(-1, 3)), strict=True):
+        pixels = np.repeat(shared_pixels[None], candidates, axis=0)
+        pixels[:, moved] = moving.reshape(candidates, len(moved), 2)
+        in_front = np.repeat(shared_in_front[None], candidates, axis=0)
+        in_front[:, moved] = moving_depth.reshape(candidates, len(moved)) > 1e-6
+        placed.append((pixels, np.all(in_front, axis=1)))
+    return placed
 
 
 def _axis_value_and_pixel_gradient(
