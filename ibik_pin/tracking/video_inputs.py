@@ -108,13 +108,17 @@ def read_videos(staging: Path, job: TrackJob, cameras: Sequence) -> VideoSources
     entries = camera_folder_entries(job.videos, [camera.name for camera in cameras], "videos")
     poses = detect_videos(entries, cameras, not job.quiet)
     extrinsics = None
-    if len(cameras) >= 3:
-        cameras, extrinsics = refitted_cameras(cameras, poses, job.refit_cameras or ())
+    # One triangulation serves the extrinsics check and the targets, unless a camera is turned.
+    triangulated = _triangulate(cameras, poses) if keypoints_needed or len(cameras) >= 3 else None
+    if triangulated is not None and len(cameras) >= 3:
+        cameras, extrinsics = refitted_cameras(cameras, poses, job.refit_cameras or (),
+                                               triangulated[1]["views_swapped"])
         if extrinsics.refitted:
             write_calibration(staging / REFITTED_CALIBRATION, in_calibration_world(cameras, POSE2SIM_TRC_TO_WORLD))
+            triangulated = None
     if not keypoints_needed:
         return VideoSources(job, cameras, poses, segmenter, extrinsics=extrinsics)
-    trc, figures = triangulated_trc(cameras, poses, video_frame_rate(entries[cameras[0].name]))
+    trc, figures = triangulated_trc(cameras, poses, video_frame_rate(entries[cameras[0].name]), triangulated)
     write_trc(staging / TRIANGULATED_TRC, trc)
     left_out = () if job.triangulated_limbs else LIMB_KEYPOINTS
     report = TriangulationReport(file=TRIANGULATED_TRC, keypoints=list(trc.marker_names),
@@ -125,15 +129,22 @@ def read_videos(staging: Path, job: TrackJob, cameras: Sequence) -> VideoSources
     return VideoSources(job, cameras, poses, segmenter, report, left_out, extrinsics)
 
 
-def refitted_cameras(cameras: Sequence, poses: Sequence[VideoPose],
-                     refit: Sequence[str]) -> tuple[list, ExtrinsicsRefit]:
+def _triangulate(cameras: Sequence, poses: Sequence[VideoPose]) -> tuple[dict, dict]:
+    """triangulate_landmarks on every camera's detections."""
+    return triangulate_landmarks(cameras, np.array([pose.keypoints for pose in poses]),
+                                 np.array([pose.visibility for pose in poses]))
+
+
+def refitted_cameras(cameras: Sequence, poses: Sequence[VideoPose], refit: Sequence[str],
+                     swapped: np.ndarray | None = None) -> tuple[list, ExtrinsicsRefit]:
     """Each camera's disagreement with the others, and the cameras with those named in `refit`
     turned to meet them (vision.extrinsics_refit), from the detections with left and right agreed
-    across views."""
+    across views (`swapped`: the (F, V) side swaps of a triangulation with these cameras, else one
+    is made)."""
     landmarks = np.array([pose.keypoints for pose in poses])
     visibility = np.array([pose.visibility for pose in poses])
-    _, quality = triangulate_landmarks(cameras, landmarks, visibility)
-    swapped = quality["views_swapped"]
+    if swapped is None:
+        swapped = _triangulate(cameras, poses)[1]["views_swapped"]
     confidence = labelled_landmarks(visibility[..., None], swapped)[..., 0]
     return refit_extrinsics(cameras, labelled_landmarks(landmarks, swapped),
                             np.where(confidence >= REFIT_MIN_VISIBILITY, confidence, 0.0), refit)
@@ -219,11 +230,12 @@ class TriangulationReport:
     reprojection_median_m: float | None
 
 
-def triangulated_trc(cameras: Sequence, poses: Sequence[VideoPose], frame_rate: float) -> tuple[TrcData, dict]:
+def triangulated_trc(cameras: Sequence, poses: Sequence[VideoPose], frame_rate: float,
+                     triangulated: tuple[dict, dict] | None = None) -> tuple[TrcData, dict]:
     """Pose2Sim keypoints triangulated from the detections, as a TRC in metres (Y up, the frame the
-    cameras project), and the per-camera quality figures of TriangulationReport."""
-    keypoints, quality = triangulate_landmarks(cameras, np.array([pose.keypoints for pose in poses]),
-                                               np.array([pose.visibility for pose in poses]))
+    cameras project), and the per-camera quality figures of TriangulationReport (`triangulated`:
+    triangulate_landmarks' answer for these cameras and poses, if already made)."""
+    keypoints, quality = triangulated if triangulated is not None else _triangulate(cameras, poses)
     names = list(keypoints)
     frames = len(poses[0].masks)
     trc = TrcData(marker_names=names, times=np.arange(frames) / frame_rate,
