@@ -124,35 +124,9 @@ class PinholeCamera(Camera):
             :class:`Projection` with pixels (N, 2) [px], jacobian (N, 2, 3) [px/m], depth (N,) [m].
         """
         x, y, depth, inverse_depth = self._normalized(points_world)
-        k1, k2, p1, p2, k3 = self._distortion_terms
-        r2 = x * x + y * y
-        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        radial_slope = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)  # d radial / d r^2
-        xy = x * y
-        two_x_x, two_y_y = 2.0 * x * x, 2.0 * y * y  # each shared by a distorted coordinate and its slope
-        x_distorted = x * radial + 2.0 * p1 * xy + p2 * (r2 + two_x_x)
-        y_distorted = y * radial + p1 * (r2 + two_y_y) + 2.0 * p2 * xy
-        # d(x_d, y_d) / d(x, y); the two off-diagonal terms are equal.
-        dxd_dx = radial + two_x_x * radial_slope + 2.0 * p1 * y + 6.0 * p2 * x
-        dyd_dy = radial + two_y_y * radial_slope + 6.0 * p1 * y + 2.0 * p2 * x
-        cross = 2.0 * xy * radial_slope + 2.0 * p1 * x + 2.0 * p2 * y
         K = self.intrinsics
-        fx, fy = K[0, 0], K[1, 1]
-        pixels = np.empty((depth.shape[0], 2))
-        np.multiply(fx, x_distorted, out=pixels[:, 0])
-        np.multiply(fy, y_distorted, out=pixels[:, 1])
-        pixels += K[:2, 2]
-        # d(u, v) / dX_cam, with d(x, y)/dX_cam = [[1, 0, -x], [0, 1, -y]] / Z; one (2N, 3) @ (3, 3)
-        # product then takes it to the world.
-        jacobian_camera = np.empty((depth.shape[0], 2, 3))
-        jacobian_camera[:, 0, 0] = fx * dxd_dx * inverse_depth
-        jacobian_camera[:, 0, 1] = fx * cross * inverse_depth
-        jacobian_camera[:, 0, 2] = -fx * (dxd_dx * x + cross * y) * inverse_depth
-        jacobian_camera[:, 1, 0] = fy * cross * inverse_depth
-        jacobian_camera[:, 1, 1] = fy * dyd_dy * inverse_depth
-        jacobian_camera[:, 1, 2] = -fy * (cross * x + dyd_dy * y) * inverse_depth
-        jacobian = (jacobian_camera.reshape(-1, 3) @ self.rotation).reshape(-1, 2, 3)
-        return Projection(pixels, jacobian, depth)
+        return _distorted_projection(x, y, depth, inverse_depth, self._distortion_terms, K[0, 0], K[1, 1], K[:2, 2],
+                                     self.rotation)
 
     def pixel_radius(self, points_world: np.ndarray, radii: np.ndarray) -> np.ndarray:
         """Image radius ``focal * r / depth`` [px] of spheres (N, 3) [m] of radii (N,) [m].
@@ -166,10 +140,10 @@ class PinholeCamera(Camera):
 
 
 class PinholeViews:
-    """Pinhole cameras that project the same points together: the operations of
-    PinholeCamera.project_with_jacobian, each on an array with the views in front, so that every
-    view's values are its camera's to the bit at the numpy overhead of one camera (a step of the
-    image level projects the same points in every view).
+    """Pinhole cameras that project the same points together: PinholeCamera.project_with_jacobian's
+    arithmetic (_distorted_projection) on arrays with the views in front, so that every view's
+    values are its camera's to the bit at the numpy overhead of one camera (a step of the image
+    level projects the same points in every view).
     """
 
     def __init__(self, cameras: Sequence[PinholeCamera]) -> None:
@@ -178,7 +152,7 @@ class PinholeViews:
         self._rotations = self._rotations_t.transpose(0, 2, 1)
         self._translations = np.stack([camera.translation for camera in self.cameras])[:, None]  # (V, 1, 3)
         terms = np.array([camera._distortion_terms for camera in self.cameras])  # (V, 5)
-        self._k1, self._k2, self._p1, self._p2, self._k3 = (terms[:, [index]] for index in range(5))  # (V, 1)
+        self._terms = tuple(terms[:, [index]] for index in range(5))  # k1, k2, p1, p2, k3, each (V, 1)
         self._fx = np.array([[camera.intrinsics[0, 0]] for camera in self.cameras])
         self._fy = np.array([[camera.intrinsics[1, 1]] for camera in self.cameras])
         self._centres = np.stack([camera.intrinsics[:2, 2] for camera in self.cameras])[:, None]  # (V, 1, 2)
@@ -193,32 +167,43 @@ class PinholeViews:
             with np.errstate(divide="ignore"):  # a point on the focal plane goes to infinity
                 inverse_depth = 1.0 / depth
         x, y = points_camera[..., 0] * inverse_depth, points_camera[..., 1] * inverse_depth
-        k1, k2, p1, p2, k3 = self._k1, self._k2, self._p1, self._p2, self._k3
-        r2 = x * x + y * y
-        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        radial_slope = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
-        xy = x * y
-        two_x_x, two_y_y = 2.0 * x * x, 2.0 * y * y
-        x_distorted = x * radial + 2.0 * p1 * xy + p2 * (r2 + two_x_x)
-        y_distorted = y * radial + p1 * (r2 + two_y_y) + 2.0 * p2 * xy
-        dxd_dx = radial + two_x_x * radial_slope + 2.0 * p1 * y + 6.0 * p2 * x
-        dyd_dy = radial + two_y_y * radial_slope + 6.0 * p1 * y + 2.0 * p2 * x
-        cross = 2.0 * xy * radial_slope + 2.0 * p1 * x + 2.0 * p2 * y
-        fx, fy = self._fx, self._fy
-        pixels = np.empty(depth.shape + (2,))
-        np.multiply(fx, x_distorted, out=pixels[..., 0])
-        np.multiply(fy, y_distorted, out=pixels[..., 1])
-        pixels += self._centres
-        jacobian_camera = np.empty(depth.shape + (2, 3))
-        jacobian_camera[..., 0, 0] = fx * dxd_dx * inverse_depth
-        jacobian_camera[..., 0, 1] = fx * cross * inverse_depth
-        jacobian_camera[..., 0, 2] = -fx * (dxd_dx * x + cross * y) * inverse_depth
-        jacobian_camera[..., 1, 0] = fy * cross * inverse_depth
-        jacobian_camera[..., 1, 1] = fy * dyd_dy * inverse_depth
-        jacobian_camera[..., 1, 2] = -fy * (cross * x + dyd_dy * y) * inverse_depth
-        views = len(self.cameras)
-        jacobian = (jacobian_camera.reshape(views, -1, 3) @ self._rotations).reshape(views, -1, 2, 3)
-        return [Projection(pixels[index], jacobian[index], depth[index]) for index in range(views)]
+        pixels, jacobian, depth = _distorted_projection(x, y, depth, inverse_depth, self._terms, self._fx, self._fy,
+                                                        self._centres, self._rotations)
+        return [Projection(pixels[index], jacobian[index], depth[index]) for index in range(len(self.cameras))]
+
+
+def _distorted_projection(x, y, depth, inverse_depth, terms, fx, fy, centre, rotation) -> Projection:
+    """Pixels, their world Jacobian and the depth from normalised coordinates x, y (shape S: (N,) for
+    one camera, (V, N) for views), OpenCV's distortion `terms` (k1, k2, p1, p2, k3), the focal
+    lengths and principal point [px] and the world-to-camera rotation (scalars and (3, 3) for one
+    camera, arrays with the views in front for several)."""
+    k1, k2, p1, p2, k3 = terms
+    r2 = x * x + y * y
+    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    radial_slope = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)  # d radial / d r^2
+    xy = x * y
+    two_x_x, two_y_y = 2.0 * x * x, 2.0 * y * y  # each shared by a distorted coordinate and its slope
+    x_distorted = x * radial + 2.0 * p1 * xy + p2 * (r2 + two_x_x)
+    y_distorted = y * radial + p1 * (r2 + two_y_y) + 2.0 * p2 * xy
+    # d(x_d, y_d) / d(x, y); the two off-diagonal terms are equal.
+    dxd_dx = radial + two_x_x * radial_slope + 2.0 * p1 * y + 6.0 * p2 * x
+    dyd_dy = radial + two_y_y * radial_slope + 6.0 * p1 * y + 2.0 * p2 * x
+    cross = 2.0 * xy * radial_slope + 2.0 * p1 * x + 2.0 * p2 * y
+    pixels = np.empty(depth.shape + (2,))
+    np.multiply(fx, x_distorted, out=pixels[..., 0])
+    np.multiply(fy, y_distorted, out=pixels[..., 1])
+    pixels += centre
+    # d(u, v) / dX_cam, with d(x, y)/dX_cam = [[1, 0, -x], [0, 1, -y]] / Z; one (2N, 3) @ (3, 3)
+    # product per camera then takes it to the world.
+    jacobian_camera = np.empty(depth.shape + (2, 3))
+    jacobian_camera[..., 0, 0] = fx * dxd_dx * inverse_depth
+    jacobian_camera[..., 0, 1] = fx * cross * inverse_depth
+    jacobian_camera[..., 0, 2] = -fx * (dxd_dx * x + cross * y) * inverse_depth
+    jacobian_camera[..., 1, 0] = fy * cross * inverse_depth
+    jacobian_camera[..., 1, 1] = fy * dyd_dy * inverse_depth
+    jacobian_camera[..., 1, 2] = -fy * (cross * x + dyd_dy * y) * inverse_depth
+    jacobian = (jacobian_camera.reshape(depth.shape[:-1] + (-1, 3)) @ rotation).reshape(depth.shape + (2, 3))
+    return Projection(pixels, jacobian, depth)
 
 
 def projector(cameras: Sequence[CameraLike]) -> Callable[[np.ndarray], list[Projection]]:
