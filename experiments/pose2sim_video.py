@@ -46,7 +46,13 @@ from ibik_pin.io.trc import TrcData, read_trc, write_trc
 from ibik_pin.io.video import read_frames
 from ibik_pin.tracking.pipeline import TrackJob, run_track
 from ibik_pin.tracking.tracker import TrackingSettings
-from ibik_pin.tracking.video_inputs import read_videos, refitted_cameras, restrict_to_subject, triangulated_trc
+from ibik_pin.tracking.video_inputs import (
+    points_inside,
+    read_videos,
+    refitted_cameras,
+    restrict_to_subject,
+    triangulated_trc,
+)
 from ibik_pin.vision.camera import cameras_in_frame
 from ibik_pin.vision.mask_store import CroppedMasks
 
@@ -81,14 +87,8 @@ def median_distance_mm(estimate: TrcData, reference: TrcData, names: list[str]) 
 
 def keypoints_inside(camera, masks, points: np.ndarray) -> dict[str, float]:
     """Share of the keypoints (F, K, 3), projected, inside the camera's masks: all and per keypoint."""
-    hits = []
-    for mask, frame_points in zip(masks, points, strict=True):
-        pixels = np.round(camera.project(frame_points)).astype(int)
-        seen = camera.contains(pixels)
-        hit = np.zeros(len(pixels), bool)
-        hit[seen] = mask[pixels[seen, 1], pixels[seen, 0]]
-        hits.append(hit)
-    hits = np.array(hits)
+    hits = np.array([points_inside(camera, mask, frame_points)
+                     for mask, frame_points in zip(masks, points, strict=True)])
     shares = {name: float(hits[:, i].mean()) for i, name in enumerate(SILHOUETTE_KEYPOINTS)}
     return {"all": float(hits.mean()), **shares}
 

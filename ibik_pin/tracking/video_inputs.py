@@ -33,8 +33,8 @@ if TYPE_CHECKING:
     from ibik_pin.tracking.pipeline import TrackJob
 
 __all__ = ["LIMB_KEYPOINTS", "REFITTED_CALIBRATION", "SEGMENTERS", "TRIANGULATED_TRC", "SilhouetteQuality",
-           "TriangulationReport", "VideoSources", "detect_videos", "keep_subject", "read_videos", "refitted_cameras",
-           "resolve_segmenter", "restrict_to_subject", "silhouette_quality", "triangulated_trc"]
+           "TriangulationReport", "VideoSources", "detect_videos", "keep_subject", "points_inside", "read_videos",
+           "refitted_cameras", "resolve_segmenter", "restrict_to_subject", "silhouette_quality", "triangulated_trc"]
 
 SEGMENTERS = ("auto", "mediapipe", "mog2")
 # How far outside a mask a projected target may fall and still claim the part it touches [m]:
@@ -304,6 +304,16 @@ class SilhouetteQuality:
     mask_area_per_view: dict[str, list[int]] = field(default_factory=dict)
 
 
+def points_inside(camera, mask: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(N,) bool: each point (N, 3), projected to its nearest pixel, falls inside the camera's mask
+    (False outside the image)."""
+    pixels = np.round(camera.project(points)).astype(int)
+    seen = camera.contains(pixels)
+    hits = np.zeros(len(pixels), bool)
+    hits[seen] = mask[pixels[seen, 1], pixels[seen, 0]]
+    return hits
+
+
 def silhouette_quality(segmenter: str, cameras: Sequence, masks_of_frame, targets_m: np.ndarray) -> SilhouetteQuality:
     """SilhouetteQuality over the frames; `masks_of_frame(f)` gives frame f's masks, one per camera,
     `targets_m` (F, T, 3) the targets in the frame the cameras project."""
@@ -315,11 +325,7 @@ def silhouette_quality(segmenter: str, cameras: Sequence, masks_of_frame, target
         for index, (camera, mask) in enumerate(zip(cameras, masks_of_frame(frame), strict=True)):
             areas[frame, index] = int(np.count_nonzero(mask))
             if present.any():
-                pixels = np.round(camera.project(points[present])).astype(int)
-                seen = camera.contains(pixels)
-                hits = np.zeros(len(pixels), bool)
-                hits[seen] = mask[pixels[seen, 1], pixels[seen, 0]]
-                inside[frame, index] = hits.mean()
+                inside[frame, index] = points_inside(camera, mask, points[present]).mean()
     for index, camera in enumerate(cameras):
         column = inside[:, index]
         quality.targets_inside_per_view[camera.name] = [None if np.isnan(v) else float(v) for v in column]
