@@ -221,29 +221,3 @@ def test_select_cameras_lists_the_available_names_for_an_unknown_one():
     expected = r"--cameras: unknown camera name\(s\) \['z'\]; the calibration has \['a', 'b'\]"
     with pytest.raises(UnknownNameError, match=expected):
         select_cameras(cameras, ["a", "z"])
-
-
-def test_pinhole_views_project_as_each_camera_to_the_bit():
-    from ibik_pin.vision.pinhole import PinholeViews, projector
-
-    rng = np.random.default_rng(31)
-    cameras = []
-    for index, count in enumerate((5, 4, 5)):
-        intrinsics = np.array([[rng.uniform(400, 900), 0.0, rng.uniform(300, 340)],
-                               [0.0, rng.uniform(400, 900), rng.uniform(220, 260)], [0.0, 0.0, 1.0]])
-        cameras.append(PinholeCamera.from_rodrigues(f"cam{index}", (640, 480), intrinsics,
-                                                    rng.normal(0.0, 0.05, count), rng.normal(0.0, 0.5, 3),
-                                                    [0.0, 0.0, 4.0] + rng.normal(0.0, 0.3, 3)))
-    views = PinholeViews(cameras)
-    for count in (1, 19, 160):
-        points = rng.normal(0.0, 1.0, (count, 3))
-        points[0] = cameras[1].center_world + cameras[1].rotation[0]  # on camera 1's focal plane
-        for camera, projection in zip(cameras, views.project_with_jacobian(points), strict=True):
-            for mine, reference in zip(projection, camera.project_with_jacobian(points), strict=True):
-                np.testing.assert_array_equal(mine, reference)  # tolerance 0 (NaN equal to NaN)
-    orthographic = OrthographicCamera("ortho", (64, 48), np.eye(3), np.zeros(3), 100.0, np.array([32.0, 24.0]))
-    points = rng.normal(0.0, 1.0, (7, 3))
-    for camera, projection in zip([orthographic, cameras[0]], projector([orthographic, cameras[0]])(points),
-                                  strict=True):
-        for mine, reference in zip(projection, camera.project_with_jacobian(points), strict=True):
-            np.testing.assert_array_equal(mine, reference)

@@ -9,11 +9,11 @@ from ibik_pin.tasks import ImageTask, View, silhouette_axis
 from ibik_pin.tasks.silhouette_axis import (
     AxisView,
     SilhouetteAxisTask,
-    _axis_value_and_pixel_gradient,
     _may_come_nearer,
     _nearest_squared,
 )
 from ibik_pin.tasks.weighted_sum import WeightedSum
+from ibik_pin.vision.kernels import axis_value_and_pixel_gradient
 from ibik_pin.vision.medial_axis import medial_axis_pixels
 from ibik_pin.vision.pinhole import look_at_camera
 from ibik_pin.vision.render import render_capsules
@@ -166,17 +166,18 @@ def _plain_axis_term(samples, end_pixels, start_index, end_index, scale):
     return value, gradient
 
 
-def test_the_vectorised_axis_term_equals_the_plain_one(human, rng):
-    """The in-place computation of the term and its gradient, and the candidates' nearest distances
-    in (C, S, N), against loops over samples and segments, on seeded problems."""
+def test_the_compiled_axis_term_and_the_vectorised_distances_equal_the_plain_ones(human, rng):
+    """The compiled term and its gradient, and the candidates' nearest distances in (C, S, N),
+    against Python loops over samples and segments, on seeded problems."""
     task = SilhouetteAxisTask(human)
     frames = len(task.frame_ids)
     for _ in range(5):
         samples = rng.uniform(0.0, 320.0, (40, 2))
         end_pixels = rng.uniform(0.0, 320.0, (frames, 2))
         end_pixels[task._end_index[0]] = end_pixels[task._start_index[0]]  # a segment of zero length
-        value, gradient = _axis_value_and_pixel_gradient(samples, end_pixels, task._start_index,
-                                                         task._end_index, 15.0)
+        gradient = np.zeros_like(end_pixels)
+        value = axis_value_and_pixel_gradient(samples, end_pixels, task._start_index, task._end_index, 15.0,
+                                              gradient)
         plain_value, plain_gradient = _plain_axis_term(samples, end_pixels, task._start_index,
                                                        task._end_index, 15.0)
         np.testing.assert_allclose(value, plain_value, rtol=1e-12)

@@ -26,6 +26,7 @@ from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.tasks.segments import SegmentCriterion, segment_ends
 from ibik_pin.vision.camera import CameraLike
+from ibik_pin.vision.kernels import pinhole_overlap, projected_overlap
 from ibik_pin.vision.pinhole import projector
 from ibik_pin.vision.support import SupportImageLike
 
@@ -123,19 +124,14 @@ class ImageTask(SegmentCriterion):
         points = self.sample_points(configuration)
         value = 0.0
         gradient_points = np.zeros_like(points)  # dh/dX for every sample, (M, 3)
-        for view, (pixels, projection_jacobian, depth) in zip(self._active_views, self._project(points), strict=True):
-            support, support_gradient = view.support.sample(pixels)
-            in_front = depth > 1e-6
-            value += np.add.reduce(np.where(in_front, support, 0.0)) / len(points)  # np.mean's sum and division
-            contribution = np.einsum("mi,mij->mj", support_gradient, projection_jacobian)
-            gradient_points += np.where(in_front[:, None], contribution, 0.0)
-        count = max(len(self._active_views), 1)
-        value /= count
-        gradient_points /= count * len(points)
+        for view in self._active_views:
+            value += _read_view(view, points, gradient_points)
+        count = max(len(self._active_views), 1) * len(points)
+        gradient_points /= count
         gradient_frames = self._interpolation.T @ gradient_points  # (K, 3)
         jacobians = configuration.frame_translation_jacobians(self._frame_ids)  # (K, 3, nv)
         gradient = np.einsum("kd,kdv->v", gradient_frames, jacobians)
-        self._cache = (float(value), gradient)
+        self._cache = (value / count, gradient)
         self._cache_version = configuration.version
         return self._cache
 
@@ -190,3 +186,24 @@ class ImageTask(SegmentCriterion):
 
     def compute_gradient(self, configuration: Configuration) -> np.ndarray:
         return self._evaluate(configuration)[1]
+
+
+def _read_view(view: View, points: np.ndarray, point_gradient: np.ndarray) -> float:
+    """The sum of a view's support at the projections of points (M, 3) [m] (0 behind the camera);
+    adds each point's d support / d X_world to point_gradient (M, 3), in one compiled loop."""
+    support = view.support
+    width, height = support.size
+    parameters = getattr(view.camera, "kernel_parameters", None)
+    projection = None if parameters is not None else view.camera.project_with_jacobian(points)
+    for whole_frame in (False, True):  # the window around the body, unless a point falls outside
+        values, row, column = support.held_values(whole_frame)
+        view_gradient = np.zeros_like(point_gradient)
+        if projection is None:
+            total, complete = pinhole_overlap(points, parameters, values, row, column, width, height, view_gradient)
+        else:
+            total, complete = projected_overlap(projection.pixels, projection.jacobian, projection.depth, values,
+                                                row, column, width, height, view_gradient)
+        if complete:
+            break
+    point_gradient += view_gradient
+    return total

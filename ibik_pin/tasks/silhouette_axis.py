@@ -36,6 +36,7 @@ from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.tasks.segments import SegmentCriterion, segment_ends
 from ibik_pin.vision.camera import CameraLike, Projection
+from ibik_pin.vision.kernels import axis_value_and_pixel_gradient
 from ibik_pin.vision.pinhole import projector
 
 __all__ = ["AxisView", "SilhouetteAxisTask"]
@@ -111,10 +112,9 @@ class SilhouetteAxisTask(SegmentCriterion):
             if not (depth > 1e-6).all():
                 continue  # a segment end behind the camera: its projection means nothing
             views += 1
-            view_value, pixel_gradient = _axis_value_and_pixel_gradient(
-                view.pixels, pixels, self._start_index, self._end_index, view.robust_scale_px
-            )
-            value += view_value
+            pixel_gradient = np.zeros_like(pixels)
+            value += axis_value_and_pixel_gradient(view.pixels, pixels, self._start_index, self._end_index,
+                                                   view.robust_scale_px, pixel_gradient)
             gradient_frames += np.einsum("ki,kij->kj", pixel_gradient, projection_jacobian)
         if views == 0:
             self._cache = (0.0, np.zeros(configuration.model.nv))
@@ -201,50 +201,6 @@ def _project_candidates(project: Callable[[np.ndarray], list[Projection]], frame
         in_front[:, moved] = moving_depth.reshape(candidates, len(moved)) > 1e-6
         placed.append((pixels, np.all(in_front, axis=1)))
     return placed
-
-
-def _axis_value_and_pixel_gradient(
-    samples: np.ndarray, end_pixels: np.ndarray, start_index: np.ndarray, end_index: np.ndarray, scale: float
-) -> tuple[float, np.ndarray]:
-    """h_axis of one view and its derivative with respect to the projected end frames.
-
-    Args:
-        samples: (N, 2) axis samples [px]; end_pixels: (K, 2) projected segment ends [px];
-        start_index, end_index: (S,) rows of end_pixels of each segment's ends; scale: c [px].
-
-    Returns:
-        The view's h_axis [px] and dh/d end_pixels, shape (K, 2).
-    """
-    starts, ends = end_pixels[start_index], end_pixels[end_index]  # (S, 2)
-    along_u = ends[:, 0] - starts[:, 0]
-    along_v = ends[:, 1] - starts[:, 1]
-    length_squared = np.maximum(along_u * along_u + along_v * along_v, 1e-12)
-    # u and v apart, in place: einsum over a last axis of 2 costs more than the arithmetic.
-    offset_u = samples[:, 0:1] - starts[:, 0]  # (N, S)
-    offset_v = samples[:, 1:2] - starts[:, 1]
-    s = offset_u * along_u
-    s += offset_v * along_v
-    s /= length_squared
-    s.clip(0.0, 1.0, out=s)
-    offset_u -= s * along_u  # now the residual: sample minus closest point
-    offset_v -= s * along_v
-    distance_squared = offset_u * offset_u
-    distance_squared += offset_v * offset_v
-    nearest = np.argmin(distance_squared, axis=1)
-    rows = np.arange(samples.shape[0])
-    s_near = s[rows, nearest]
-    weight = np.exp(-distance_squared[rows, nearest] / scale**2)
-    count = samples.shape[0]
-    value = -0.5 * scale * float(np.add.reduce(1.0 - weight) / count)  # np.mean's sum and division
-    pull = weight / (scale * count)
-    pull_u, pull_v = pull * offset_u[rows, nearest], pull * offset_v[rows, nearest]
-    # One bincount over the starts then the ends adds in np.add.at's order (the same sums to the bit).
-    frames = end_pixels.shape[0]
-    index = np.concatenate((start_index[nearest], end_index[nearest]))
-    gradient = np.empty_like(end_pixels)
-    gradient[:, 0] = np.bincount(index, np.concatenate(((1.0 - s_near) * pull_u, s_near * pull_u)), frames)
-    gradient[:, 1] = np.bincount(index, np.concatenate(((1.0 - s_near) * pull_v, s_near * pull_v)), frames)
-    return value, gradient
 
 
 def _may_come_nearer(samples: np.ndarray, starts: np.ndarray, ends: np.ndarray, fixed: np.ndarray) -> np.ndarray:

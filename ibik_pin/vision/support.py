@@ -54,6 +54,11 @@ class SupportImageLike(Protocol):
         """Values (N,) and gradient (N, 2) d values / d (u, v) at (N, 2) pixels [px]."""
         ...
 
+    def held_values(self, whole_frame: bool = False) -> tuple[np.ndarray, int, int]:
+        """The values computed so far, (h, w) float32, and the (row, column) of the frame where
+        they start; with `whole_frame`, the frame's (H, W) values from (0, 0)."""
+        ...
+
 
 
 def _as_pixels(pixels) -> np.ndarray:
@@ -125,6 +130,15 @@ class SupportImage:
     @property
     def enabled(self) -> bool:
         return self._enabled
+
+    def held_values(self, whole_frame: bool = False) -> tuple[np.ndarray, int, int]:
+        """The values computed so far, (h, w) float32, and the (row, column) of the frame where
+        they start: the window around the body until something reads outside it; with
+        `whole_frame` (or once computed), the frame's (H, W) values from (0, 0)."""
+        if self._values is None and not whole_frame:
+            window = cast(_Window, self._window)
+            return window.values, window.row, window.column
+        return self.values, 0, 0
 
     @property
     def size(self) -> tuple[int, int]:

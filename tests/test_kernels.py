@@ -1,0 +1,93 @@
+"""The compiled loops of the image criteria against the plain numpy reading they replace."""
+
+import numpy as np
+import pytest
+
+from ibik_pin.vision.camera import OrthographicCamera
+from ibik_pin.vision.kernels import pinhole_overlap, projected_overlap
+from ibik_pin.vision.pinhole import PinholeCamera
+from ibik_pin.vision.support import SupportImage, support_from_mask
+
+
+def distorted_camera(rng) -> PinholeCamera:
+    intrinsics = np.array([[rng.uniform(500, 900), 0.0, rng.uniform(300, 340)],
+                           [0.0, rng.uniform(500, 900), rng.uniform(220, 260)], [0.0, 0.0, 1.0]])
+    return PinholeCamera.from_rodrigues("cam", (640, 480), intrinsics, [-0.2, 0.05, 0.001, -0.002, 0.01],
+                                        rng.normal(0.0, 0.1, 3), [0.0, 0.0, 4.0] + rng.normal(0.0, 0.2, 3))
+
+
+def silhouette_support() -> SupportImage:
+    mask = np.zeros((480, 640), bool)
+    mask[150:330, 280:360] = True
+    mask[200:230, 200:440] = True
+    return support_from_mask(mask)
+
+
+def plain_overlap(projection, support: SupportImage) -> tuple[float, np.ndarray]:
+    """The sum of the support over the points in front and each point's d support / d X_world, by
+    SupportImage.sample and the chain rule."""
+    in_front = projection.depth > 1e-6
+    pixels = np.where(in_front[:, None], projection.pixels, 0.0)  # NaN pixels behind are not read
+    sample = support.sample(pixels)
+    gradient = np.einsum("mi,mij->mj", sample.gradient, projection.jacobian)
+    return float(np.sum(sample.values[in_front])), np.where(in_front[:, None], gradient, 0.0)
+
+
+def points_around(camera: PinholeCamera, rng, count: int) -> np.ndarray:
+    """Points in front of the camera, some projecting outside the image, one behind it and one on
+    its focal plane."""
+    points = camera.center_world + rng.uniform(2.5, 4.5, (count, 1)) * camera.rotation[2]
+    points += rng.normal(0.0, 1.0, (count, 2)) @ camera.rotation[:2]  # sideways: some outside the image
+    points[0] = camera.center_world - camera.rotation[2]  # behind
+    points[1] = camera.center_world + camera.rotation[0]  # on the focal plane: depth 0
+    return points
+
+
+def test_the_compiled_pinhole_overlap_equals_the_plain_reading_on_the_whole_frame(rng):
+    support = silhouette_support()
+    whole = SupportImage(support.values)
+    for _ in range(5):
+        camera = distorted_camera(rng)
+        points = points_around(camera, rng, 150)
+        gradient = np.zeros_like(points)
+        values, row, column = whole.held_values()
+        total, complete = pinhole_overlap(points, camera.kernel_parameters, values, row, column, 640, 480, gradient)
+        expected_total, expected_gradient = plain_overlap(camera.project_with_jacobian(points), whole)
+        assert complete
+        assert total == pytest.approx(expected_total, rel=1e-12)
+        np.testing.assert_allclose(gradient, expected_gradient, rtol=1e-10, atol=1e-12)
+        assert not gradient[:2].any()  # behind the camera and on its plane: no pull
+
+
+def test_the_compiled_overlap_on_the_window_is_complete_only_when_every_point_reads_inside_it(rng):
+    support = silhouette_support()
+    camera = distorted_camera(rng)
+    window, row, column = support.held_values()
+    assert window.shape != (480, 640) and (row, column) != (0, 0)
+    # Points whose pixels lie on the silhouette: read on the window, the whole frame's values.
+    rays = np.column_stack([rng.uniform(290, 350, 60), rng.uniform(160, 320, 60)])
+    undistorted = np.linalg.solve(camera.intrinsics, np.column_stack([rays, np.ones(60)]).T).T
+    points = camera.center_world + (3.0 * undistorted) @ camera.rotation
+    near_gradient = np.zeros_like(points)
+    total, complete = pinhole_overlap(points, camera.kernel_parameters, window, row, column, 640, 480, near_gradient)
+    expected_total, expected_gradient = plain_overlap(camera.project_with_jacobian(points),
+                                                      SupportImage(support.values))
+    assert complete and total == pytest.approx(expected_total, rel=1e-12)
+    np.testing.assert_allclose(near_gradient, expected_gradient, rtol=1e-10, atol=1e-12)
+    far = np.vstack([points, camera.center_world + 3.0 * camera.rotation[2] + 2.0 * camera.rotation[0]])
+    _, complete = pinhole_overlap(far, camera.kernel_parameters, window, row, column, 640, 480, np.zeros_like(far))
+    assert not complete
+
+
+def test_the_compiled_overlap_of_projected_points_equals_the_plain_reading(rng):
+    support = SupportImage(silhouette_support().values)
+    camera = OrthographicCamera("ortho", (640, 480), np.eye(3), np.zeros(3), 100.0, np.array([320.0, 240.0]))
+    points = rng.normal(0.0, 1.5, (120, 3))
+    projection = camera.project_with_jacobian(points)
+    gradient = np.zeros_like(points)
+    values, row, column = support.held_values()
+    total, complete = projected_overlap(projection.pixels, projection.jacobian, projection.depth, values, row,
+                                        column, 640, 480, gradient)
+    expected_total, expected_gradient = plain_overlap(projection, support)
+    assert complete and total == pytest.approx(expected_total, rel=1e-12)
+    np.testing.assert_allclose(gradient, expected_gradient, rtol=1e-10, atol=1e-12)
