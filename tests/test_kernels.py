@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
+from ibik_pin.tasks.image import View, support_at
 from ibik_pin.vision.camera import OrthographicCamera
-from ibik_pin.vision.kernels import pinhole_overlap, projected_overlap
+from ibik_pin.vision.kernels import support_overlap
 from ibik_pin.vision.pinhole import PinholeCamera
 from ibik_pin.vision.support import SupportImage, support_from_mask
 
@@ -23,14 +24,22 @@ def silhouette_support() -> SupportImage:
     return support_from_mask(mask)
 
 
-def plain_overlap(projection, support: SupportImage) -> tuple[float, np.ndarray]:
-    """The sum of the support over the points in front and each point's d support / d X_world, by
+def plain_reading(projection, support: SupportImage) -> tuple[np.ndarray, np.ndarray]:
+    """The support at the points in front (0 behind) and each point's d support / d X_world, by
     SupportImage.sample and the chain rule."""
     in_front = projection.depth > 1e-6
     pixels = np.where(in_front[:, None], projection.pixels, 0.0)  # NaN pixels behind are not read
     sample = support.sample(pixels)
     gradient = np.einsum("mi,mij->mj", sample.gradient, projection.jacobian)
-    return float(np.sum(sample.values[in_front])), np.where(in_front[:, None], gradient, 0.0)
+    return np.where(in_front, sample.values, 0.0), np.where(in_front[:, None], gradient, 0.0)
+
+
+def compiled_overlap(projection, support: SupportImage, whole_frame: bool = False):
+    """support_overlap's sum, gradient and completeness on the support's held values."""
+    gradient = np.zeros((len(projection.depth), 3))
+    values, row, column = support.held_values(whole_frame)
+    total, complete = support_overlap(*projection, values, row, column, *support.size, gradient)
+    return total, gradient, complete
 
 
 def points_around(camera: PinholeCamera, rng, count: int) -> np.ndarray:
@@ -43,20 +52,19 @@ def points_around(camera: PinholeCamera, rng, count: int) -> np.ndarray:
     return points
 
 
-def test_the_compiled_pinhole_overlap_equals_the_plain_reading_on_the_whole_frame(rng):
-    support = silhouette_support()
-    whole = SupportImage(support.values)
+def test_the_compiled_overlap_equals_the_plain_reading_on_the_whole_frame(rng):
+    support = SupportImage(silhouette_support().values)
     for _ in range(5):
         camera = distorted_camera(rng)
         points = points_around(camera, rng, 150)
-        gradient = np.zeros_like(points)
-        values, row, column = whole.held_values()
-        total, complete = pinhole_overlap(points, camera.kernel_parameters, values, row, column, 640, 480, gradient)
-        expected_total, expected_gradient = plain_overlap(camera.project_with_jacobian(points), whole)
+        projection = camera.project_with_jacobian(points)
+        total, gradient, complete = compiled_overlap(projection, support)
+        values, expected_gradient = plain_reading(projection, support)
         assert complete
-        assert total == pytest.approx(expected_total, rel=1e-12)
+        assert total == pytest.approx(values.sum(), rel=1e-12)
         np.testing.assert_allclose(gradient, expected_gradient, rtol=1e-10, atol=1e-12)
         assert not gradient[:2].any()  # behind the camera and on its plane: no pull
+        np.testing.assert_allclose(support_at(View(camera, support), points), values, rtol=1e-12, atol=1e-12)
 
 
 def test_the_compiled_overlap_on_the_window_is_complete_only_when_every_point_reads_inside_it(rng):
@@ -68,26 +76,24 @@ def test_the_compiled_overlap_on_the_window_is_complete_only_when_every_point_re
     rays = np.column_stack([rng.uniform(290, 350, 60), rng.uniform(160, 320, 60)])
     undistorted = np.linalg.solve(camera.intrinsics, np.column_stack([rays, np.ones(60)]).T).T
     points = camera.center_world + (3.0 * undistorted) @ camera.rotation
-    near_gradient = np.zeros_like(points)
-    total, complete = pinhole_overlap(points, camera.kernel_parameters, window, row, column, 640, 480, near_gradient)
-    expected_total, expected_gradient = plain_overlap(camera.project_with_jacobian(points),
-                                                      SupportImage(support.values))
-    assert complete and total == pytest.approx(expected_total, rel=1e-12)
-    np.testing.assert_allclose(near_gradient, expected_gradient, rtol=1e-10, atol=1e-12)
+    projection = camera.project_with_jacobian(points)
+    total, gradient, complete = compiled_overlap(projection, support)
+    values, expected_gradient = plain_reading(projection, SupportImage(support.values))
+    assert complete and total == pytest.approx(values.sum(), rel=1e-12)
+    np.testing.assert_allclose(gradient, expected_gradient, rtol=1e-10, atol=1e-12)
     far = np.vstack([points, camera.center_world + 3.0 * camera.rotation[2] + 2.0 * camera.rotation[0]])
-    _, complete = pinhole_overlap(far, camera.kernel_parameters, window, row, column, 640, 480, np.zeros_like(far))
-    assert not complete
+    assert not compiled_overlap(camera.project_with_jacobian(far), silhouette_support())[2]
+    # support_at then reads the whole frame.
+    windowed = silhouette_support()
+    expected, _ = plain_reading(camera.project_with_jacobian(far), SupportImage(windowed.values))
+    np.testing.assert_allclose(support_at(View(camera, silhouette_support()), far), expected, rtol=1e-12, atol=1e-12)
 
 
-def test_the_compiled_overlap_of_projected_points_equals_the_plain_reading(rng):
+def test_the_compiled_overlap_of_an_orthographic_camera_equals_the_plain_reading(rng):
     support = SupportImage(silhouette_support().values)
     camera = OrthographicCamera("ortho", (640, 480), np.eye(3), np.zeros(3), 100.0, np.array([320.0, 240.0]))
-    points = rng.normal(0.0, 1.5, (120, 3))
-    projection = camera.project_with_jacobian(points)
-    gradient = np.zeros_like(points)
-    values, row, column = support.held_values()
-    total, complete = projected_overlap(projection.pixels, projection.jacobian, projection.depth, values, row,
-                                        column, 640, 480, gradient)
-    expected_total, expected_gradient = plain_overlap(projection, support)
-    assert complete and total == pytest.approx(expected_total, rel=1e-12)
+    projection = camera.project_with_jacobian(rng.normal(0.0, 1.5, (120, 3)))
+    total, gradient, complete = compiled_overlap(projection, support)
+    values, expected_gradient = plain_reading(projection, support)
+    assert complete and total == pytest.approx(values.sum(), rel=1e-12)
     np.testing.assert_allclose(gradient, expected_gradient, rtol=1e-10, atol=1e-12)

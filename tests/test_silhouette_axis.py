@@ -5,15 +5,13 @@ import pytest
 
 from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError
-from ibik_pin.tasks import ImageTask, View, silhouette_axis
+from ibik_pin.tasks import ImageTask, View
 from ibik_pin.tasks.silhouette_axis import (
     AxisView,
     SilhouetteAxisTask,
-    _may_come_nearer,
-    _nearest_squared,
 )
 from ibik_pin.tasks.weighted_sum import WeightedSum
-from ibik_pin.vision.kernels import axis_value_and_pixel_gradient
+from ibik_pin.vision.kernels import axis_value_and_pixel_gradient, nearest_squared_distances
 from ibik_pin.vision.medial_axis import medial_axis_pixels
 from ibik_pin.vision.pinhole import look_at_camera
 from ibik_pin.vision.render import render_capsules
@@ -183,37 +181,29 @@ def test_the_compiled_axis_term_and_the_vectorised_distances_equal_the_plain_one
         np.testing.assert_allclose(value, plain_value, rtol=1e-12)
         np.testing.assert_allclose(gradient, plain_gradient, rtol=1e-10, atol=1e-15)
         starts, ends = rng.uniform(0.0, 320.0, (2, 7, 3, 2))  # 7 candidates, 3 segments each
-        plain = [[min(float(residual @ residual) for _, residual in
-                      (_plain_closest(sample, a[k], b[k]) for k in range(3))) for sample in samples]
-                 for a, b in zip(starts, ends, strict=True)]
-        np.testing.assert_allclose(_nearest_squared(samples, starts, ends), plain, rtol=1e-12, atol=1e-9)
+        plain = np.array([[min(float(residual @ residual) for _, residual in
+                               (_plain_closest(sample, a[k], b[k]) for k in range(3))) for sample in samples]
+                          for a, b in zip(starts, ends, strict=True)])
+        nearest = np.empty((7, len(samples)))
+        nearest_squared_distances(samples, starts, ends, np.full(len(samples), np.inf), nearest)
+        np.testing.assert_allclose(nearest, plain, rtol=1e-12, atol=1e-9)
 
 
-def test_only_samples_that_no_candidate_segment_comes_nearer_to_are_skipped(rng):
-    skipped = 0
+def test_the_candidates_nearest_distances_with_shared_segments_are_the_smaller_of_both(rng):
+    """Samples far from every candidate's segments take the shared segments' distance without
+    computing the candidates' (most of them here: the candidates move in a small box)."""
     for _ in range(20):
         samples = rng.uniform(0.0, 640.0, (300, 2))
         starts, ends = rng.uniform(250.0, 330.0, (2, 36, 2, 2))  # 36 candidates of 2 moving segments
-        fixed = _nearest_squared(samples, *rng.uniform(0.0, 640.0, (2, 1, 6, 2)))[0]
-        reached = _may_come_nearer(samples, starts, ends, fixed)
-        assert np.all(_nearest_squared(samples, starts, ends)[:, ~reached] >= fixed[~reached])
-        skipped += int((~reached).sum())
-    assert skipped > 20 * 100
-
-
-def test_the_swivel_candidates_axis_values_skipping_samples_equal_those_computing_all(human, rng, monkeypatch):
-    silhouette_q = random_human_configuration(human, rng, spread=0.3)
-    axis = SilhouetteAxisTask(human, [view for _, _, view in _axis_views(human, silhouette_q)])
-    positions = np.repeat(Configuration(human.model, silhouette_q).frame_positions(axis.frame_ids)[None], 36, axis=0)
-    row = int(np.flatnonzero(axis.frame_ids == human.frame_id("LElbow"))[0])
-    positions[:, row] += rng.normal(0.0, 0.05, (36, 3))
-    kept = []
-    monkeypatch.setattr(silhouette_axis, "_may_come_nearer", lambda *args: kept.append(_may_come_nearer(*args))
-                        or kept[-1])
-    skipping = axis.values_at(positions, moved=np.array([row]))
-    assert sum(int((~reached).sum()) for reached in kept) > 0
-    monkeypatch.setattr(silhouette_axis, "_may_come_nearer", lambda samples, *_: np.ones(len(samples), dtype=bool))
-    assert np.array_equal(skipping, axis.values_at(positions, moved=np.array([row])))
+        fixed = np.min([[float(residual @ residual) for sample in samples
+                         for residual in [_plain_closest(sample, a, b)[1]]]
+                        for a, b in rng.uniform(0.0, 640.0, (6, 2, 2))], axis=0)
+        plain = np.array([[min(fixed[i], *(float(residual @ residual) for _, residual in
+                                           (_plain_closest(sample, a[k], b[k]) for k in range(2))))
+                           for i, sample in enumerate(samples)] for a, b in zip(starts, ends, strict=True)])
+        nearest = np.empty((36, len(samples)))
+        nearest_squared_distances(samples, starts, ends, fixed, nearest)
+        np.testing.assert_allclose(nearest, plain, rtol=1e-12, atol=1e-9)
 
 
 def test_values_at_reading_the_pose_equal_those_computing_it_for_every_limb(human, rng):

@@ -26,8 +26,7 @@ from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.tasks.segments import SegmentCriterion, segment_ends
 from ibik_pin.vision.camera import CameraLike
-from ibik_pin.vision.kernels import pinhole_overlap, projected_overlap
-from ibik_pin.vision.pinhole import projector
+from ibik_pin.vision.kernels import support_overlap, support_values
 from ibik_pin.vision.support import SupportImageLike
 
 
@@ -110,7 +109,6 @@ class ImageTask(SegmentCriterion):
                     stacklevel=2,
                 )
         self._active_views = [v for v in self.views if v.support.enabled]
-        self._project = projector([view.camera for view in self._active_views])
         self.enabled = bool(self._active_views)
         self._cache_version = -1
 
@@ -167,18 +165,16 @@ class ImageTask(SegmentCriterion):
 
     def _support_values(self, points: np.ndarray) -> list[np.ndarray]:
         """Per view, the support at (C, M, 3) points [m] (0 behind the camera), shape (C, M)."""
-        projections = self._project(points.reshape(-1, 3))
-        return [np.where(depth > 1e-6, view.support.sample(pixels).values, 0.0).reshape(points.shape[:2])
-                for view, (pixels, _, depth) in zip(self._active_views, projections, strict=True)]
+        flat = points.reshape(-1, 3)
+        return [support_at(view, flat).reshape(points.shape[:2]) for view in self._active_views]
 
     def inside_silhouettes(self, points: np.ndarray, tolerance_px: float = 2.0) -> np.ndarray:
         """(N,) bool: each world point (N, 3) [m] projects inside the silhouette, or within
         `tolerance_px` of it, in every enabled view (the support is a signed distance, positive
-        inside: the silhouette's border is 0)."""
+        inside: the silhouette's border is 0; a point behind a camera is outside)."""
         inside = np.ones(len(points), dtype=bool)
-        projections = self._project(np.asarray(points, dtype=float))
-        for view, (pixels, _, depth) in zip(self._active_views, projections, strict=True):
-            inside &= (depth > 1e-6) & (view.support.sample(pixels).values > -float(tolerance_px))
+        for view in self._active_views:
+            inside &= support_at(view, points, behind=-np.inf) > -float(tolerance_px)
         return inside
 
     def compute_value(self, configuration: Configuration) -> float:
@@ -191,19 +187,26 @@ class ImageTask(SegmentCriterion):
 def _read_view(view: View, points: np.ndarray, point_gradient: np.ndarray) -> float:
     """The sum of a view's support at the projections of points (M, 3) [m] (0 behind the camera);
     adds each point's d support / d X_world to point_gradient (M, 3), in one compiled loop."""
-    support = view.support
-    width, height = support.size
-    parameters = getattr(view.camera, "kernel_parameters", None)
-    projection = None if parameters is not None else view.camera.project_with_jacobian(points)
+    pixels, jacobian, depth = view.camera.project_with_jacobian(points)
+    width, height = view.support.size
     for whole_frame in (False, True):  # the window around the body, unless a point falls outside
-        values, row, column = support.held_values(whole_frame)
+        values, row, column = view.support.held_values(whole_frame)
         view_gradient = np.zeros_like(point_gradient)
-        if projection is None:
-            total, complete = pinhole_overlap(points, parameters, values, row, column, width, height, view_gradient)
-        else:
-            total, complete = projected_overlap(projection.pixels, projection.jacobian, projection.depth, values,
-                                                row, column, width, height, view_gradient)
+        total, complete = support_overlap(pixels, jacobian, depth, values, row, column, width, height, view_gradient)
         if complete:
             break
     point_gradient += view_gradient
     return total
+
+
+def support_at(view: View, points: np.ndarray, behind: float = 0.0) -> np.ndarray:
+    """A view's support at the projections of world points (N, 3) [m], `behind` for the points
+    behind the camera, shape (N,)."""
+    pixels, _, depth = view.camera.project_with_jacobian(np.asarray(points, dtype=float))
+    width, height = view.support.size
+    read = np.empty(len(depth))
+    for whole_frame in (False, True):  # the window around the body, unless a point falls outside
+        values, row, column = view.support.held_values(whole_frame)
+        if support_values(pixels, depth, values, row, column, width, height, float(behind), read):
+            break
+    return read

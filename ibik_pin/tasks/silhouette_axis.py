@@ -36,7 +36,7 @@ from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.tasks.segments import SegmentCriterion, segment_ends
 from ibik_pin.vision.camera import CameraLike, Projection
-from ibik_pin.vision.kernels import axis_value_and_pixel_gradient
+from ibik_pin.vision.kernels import axis_value_and_pixel_gradient, nearest_squared_distances
 from ibik_pin.vision.pinhole import projector
 
 __all__ = ["AxisView", "SilhouetteAxisTask"]
@@ -156,16 +156,14 @@ class SilhouetteAxisTask(SegmentCriterion):
             at_pose = None if known is None else known[index]
             starts, ends = pixels[:, self._start_index[changing]], pixels[:, self._end_index[changing]]
             if changing.all():
-                nearest = _nearest_squared(view.pixels, starts, ends)  # (C, N)
+                fixed = np.full(len(view.pixels), np.inf)
             else:
                 fixed = (at_pose[2][~changing].min(axis=0) if at_pose is not None else
-                         _nearest_squared(view.pixels, pixels[:1, self._start_index[~changing]],
-                                          pixels[:1, self._end_index[~changing]])[0])
-                # The changing segments only where some candidate may come nearer than the fixed ones:
-                # elsewhere the minimum is the fixed distance, the same value without the work.
-                reached = _may_come_nearer(view.pixels, starts, ends, fixed)
-                nearest = np.repeat(fixed[None], candidates, axis=0)
-                nearest[:, reached] = np.minimum(_nearest_squared(view.pixels[reached], starts, ends), fixed[reached])
+                         _squared_distances(view.pixels, pixels[:1, self._start_index[~changing]],
+                                            pixels[:1, self._end_index[~changing]])[0].min(axis=0))
+            nearest = np.empty((candidates, len(view.pixels)))
+            nearest_squared_distances(view.pixels, np.ascontiguousarray(starts), np.ascontiguousarray(ends), fixed,
+                                      nearest)
             scale = view.robust_scale_px
             view_values = -0.5 * scale * np.mean(1.0 - np.exp(-nearest / scale**2), axis=1)
             values += np.where(visible, view_values, 0.0)
@@ -201,34 +199,6 @@ def _project_candidates(project: Callable[[np.ndarray], list[Projection]], frame
         in_front[:, moved] = moving_depth.reshape(candidates, len(moved)) > 1e-6
         placed.append((pixels, np.all(in_front, axis=1)))
     return placed
-
-
-def _may_come_nearer(samples: np.ndarray, starts: np.ndarray, ends: np.ndarray, fixed: np.ndarray) -> np.ndarray:
-    """(N,) bool: whether some segment (C, S, 2) may pass nearer a sample than `fixed` (N,) [px^2].
-
-    Every segment lies within the box of all their ends, so a sample's squared distance to that box
-    bounds its distance to each from below; False only where `fixed` is below that bound with a
-    margin far above the rounding of either. NaN or infinite ends give True.
-    """
-    ends_all = np.concatenate((starts, ends), axis=1).reshape(-1, 2)
-    low, high = ends_all.min(axis=0), ends_all.max(axis=0)
-    outside = np.maximum(np.maximum(low - samples, samples - high), 0.0)  # (N, 2) [px] beyond the box
-    bound = np.einsum("ni,ni->n", outside, outside)
-    return ~(fixed < bound * (1.0 - 1e-9) - 1e-6)
-
-
-def _nearest_squared(samples: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
-    """Squared distance [px^2] of each sample to the nearest of the segments, per candidate.
-
-    Args:
-        samples: (N, 2) [px]; starts, ends: (C, S, 2) segment ends of each candidate [px].
-
-    Returns:
-        (C, N); infinite when S = 0.
-    """
-    if starts.shape[1] == 0:
-        return np.full((starts.shape[0], samples.shape[0]), np.inf)
-    return _squared_distances(samples, starts, ends).min(axis=1)
 
 
 def _squared_distances(samples: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:

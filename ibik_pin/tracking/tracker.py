@@ -27,6 +27,7 @@ from ibik_pin.model import BodyModel
 from ibik_pin.solvers import LevelReport, SolveResult, make_solver
 from ibik_pin.tasks import FramePositionTask, ImageTask, PostureTask
 from ibik_pin.tasks.base import GradientTask
+from ibik_pin.tasks.image import support_at
 from ibik_pin.tasks.segments import SegmentCriterion
 from ibik_pin.tasks.silhouette_axis import SilhouetteAxisTask
 from ibik_pin.tasks.weighted_sum import WeightedSum
@@ -394,6 +395,6 @@ class Tracker:
         for index, view in enumerate(self.image_task.views):
             if view.camera.name in disabled:
                 continue
-            values = view.support.sample(view.camera.project(points)).values
+            values = support_at(view, points)
             overlap[index], inside[index] = float(np.mean(values)), float(np.mean(values > 0.0))
         return overlap, inside

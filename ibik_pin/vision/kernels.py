@@ -8,12 +8,12 @@ in one call per view.
 
 - :func:`pinhole_project`: points through an OpenCV pinhole camera, distortion included, with the
   projection's analytic Jacobian (:class:`ibik_pin.vision.pinhole.PinholeCamera` projects with it).
-- :func:`pinhole_overlap`: project points so, read a support image by bilinear interpolation and
-  add each point's d support / d X_world (the arithmetic of
-  :meth:`ibik_pin.vision.support.SupportImage.sample`).
-- :func:`projected_overlap`: the same reading for points another camera model projected.
+- :func:`support_overlap`, :func:`support_values`: read a support image at projected points by
+  bilinear interpolation (the arithmetic of :meth:`ibik_pin.vision.support.SupportImage.sample`):
+  their sum and each point's d support / d X_world, or the values alone.
 - :func:`axis_value_and_pixel_gradient`: the silhouette-axis term of one view and its derivative
-  with respect to the projected segment ends (:mod:`ibik_pin.tasks.silhouette_axis`).
+  with respect to the projected segment ends; :func:`nearest_squared_distances`: its distances for
+  the swivel search's candidates (:mod:`ibik_pin.tasks.silhouette_axis`).
 
 They are compiled on first use and cached on disk (Numba's ``cache=True``), so only the first run
 on a machine pays the compilation (a few seconds).
@@ -24,8 +24,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["MIN_DEPTH", "axis_value_and_pixel_gradient", "pinhole_overlap", "pinhole_parameters", "pinhole_project",
-           "projected_overlap"]
+__all__ = ["MIN_DEPTH", "axis_value_and_pixel_gradient", "nearest_squared_distances", "pinhole_parameters",
+           "pinhole_project", "support_overlap", "support_values"]
 
 # A point nearer the camera plane than this [m] is behind it: it reads 0 and pulls nowhere.
 MIN_DEPTH = 1e-6
@@ -117,41 +117,21 @@ def pinhole_project(points, camera, pixels, jacobian, depth):
 
 
 @njit(cache=True, nogil=True)
-def pinhole_overlap(points, camera, support, row0, column0, width, height, point_gradient):
-    """Sum of the support at the projections of world points, and each point's derivative.
+def support_overlap(pixels, jacobians, depth, support, row0, column0, width, height, point_gradient):
+    """Sum of the support at projected points, and each point's derivative.
 
     Args:
-        points: (M, 3) world points [m].
-        camera: (21,) :func:`pinhole_parameters`.
+        pixels: (M, 2) projections [px]; jacobians: (M, 2, 3) their d pixels / d X_world [px/m];
+            depth: (M,) [m] (a point nearer than MIN_DEPTH is behind the camera: it reads 0).
         support: (h, w) float32 support values of the frame from (row0, column0) on.
         width, height: the frame's size [px].
-        point_gradient: (M, 3) to which each point's d support / d X_world [support units/m] is
-            added (points behind the camera add nothing).
+        point_gradient: (M, 3) to which each point's d support / d X_world [support units/m] is added.
 
     Returns:
         (sum of the support over the points in front of the camera, complete): complete is False,
         and point_gradient partly written, when a point reads outside `support`; the caller then
         reads the whole frame instead.
     """
-    total = 0.0
-    for m in range(points.shape[0]):
-        u, v, depth, j00, j01, j02, j10, j11, j12 = _project_point(camera, points[m, 0], points[m, 1], points[m, 2])
-        if not depth > MIN_DEPTH:
-            continue
-        value, d_u, d_v, inside = _read_support(u, v, support, row0, column0, width, height)
-        if not inside:
-            return total, False
-        total += value
-        point_gradient[m, 0] += d_u * j00 + d_v * j10
-        point_gradient[m, 1] += d_u * j01 + d_v * j11
-        point_gradient[m, 2] += d_u * j02 + d_v * j12
-    return total, True
-
-
-@njit(cache=True, nogil=True)
-def projected_overlap(pixels, jacobians, depth, support, row0, column0, width, height, point_gradient):
-    """:func:`pinhole_overlap` for points projected by any camera: pixels (M, 2) [px], their world
-    Jacobians (M, 2, 3) [px/m] and depths (M,) [m]; same returns."""
     total = 0.0
     for m in range(pixels.shape[0]):
         if not depth[m] > MIN_DEPTH:
@@ -163,6 +143,68 @@ def projected_overlap(pixels, jacobians, depth, support, row0, column0, width, h
         for axis in range(3):
             point_gradient[m, axis] += d_u * jacobians[m, 0, axis] + d_v * jacobians[m, 1, axis]
     return total, True
+
+
+@njit(cache=True, nogil=True)
+def support_values(pixels, depth, support, row0, column0, width, height, behind, values):
+    """The support at projected points, `behind` for those behind the camera: writes values (M,)
+    [support units].
+
+    Same arguments as :func:`support_overlap`; returns complete (False: a point read outside
+    `support`, values partly written).
+    """
+    for m in range(pixels.shape[0]):
+        values[m] = behind
+        if not depth[m] > MIN_DEPTH:
+            continue
+        value, _, _, inside = _read_support(pixels[m, 0], pixels[m, 1], support, row0, column0, width, height)
+        if not inside:
+            return False
+        values[m] = value
+    return True
+
+
+@njit(cache=True, nogil=True)
+def nearest_squared_distances(samples, starts, ends, fixed, nearest):
+    """Per candidate, each sample's squared distance [px^2] to the nearest of its segments or
+    `fixed`, whichever is smaller.
+
+    Args:
+        samples: (N, 2) [px]; starts, ends: (C, S, 2) the candidates' segment ends [px];
+        fixed: (N,) the squared distance to segments every candidate shares [px^2] (inf: none).
+        nearest: (C, N) written.
+
+    A sample whose `fixed` distance is below its distance to the box of every candidate's ends is
+    skipped (no segment can come nearer): the candidates move one joint, most samples lie far.
+    """
+    candidates, segments = starts.shape[0], starts.shape[1]
+    low_u, low_v, high_u, high_v = np.inf, np.inf, -np.inf, -np.inf
+    for c in range(candidates):
+        for k in range(segments):
+            for u, v in ((starts[c, k, 0], starts[c, k, 1]), (ends[c, k, 0], ends[c, k, 1])):
+                low_u, high_u = min(low_u, u), max(high_u, u)
+                low_v, high_v = min(low_v, v), max(high_v, v)
+    for i in range(samples.shape[0]):
+        su, sv = samples[i, 0], samples[i, 1]
+        beyond_u = max(low_u - su, su - high_u, 0.0)
+        beyond_v = max(low_v - sv, sv - high_v, 0.0)
+        # Only where no segment can come nearer; the margin is far above the rounding of either.
+        if fixed[i] < (beyond_u * beyond_u + beyond_v * beyond_v) * (1.0 - 1e-9) - 1e-6:
+            for c in range(candidates):
+                nearest[c, i] = fixed[i]
+            continue
+        for c in range(candidates):
+            best = fixed[i]
+            for k in range(segments):
+                start_u, start_v = starts[c, k, 0], starts[c, k, 1]
+                along_u, along_v = ends[c, k, 0] - start_u, ends[c, k, 1] - start_v
+                offset_u, offset_v = su - start_u, sv - start_v
+                s = (offset_u * along_u + offset_v * along_v) / max(along_u * along_u + along_v * along_v, 1e-12)
+                s = min(max(s, 0.0), 1.0)
+                offset_u -= s * along_u
+                offset_v -= s * along_v
+                best = min(best, offset_u * offset_u + offset_v * offset_v)
+            nearest[c, i] = best
 
 
 @njit(cache=True, nogil=True)
@@ -184,6 +226,15 @@ def axis_value_and_pixel_gradient(samples, end_pixels, start_index, end_index, s
     segments = start_index.shape[0]
     total = 0.0
     inverse_scale_squared = 1.0 / (scale * scale)
+    # Each segment's start, direction and 1 / length^2, once for all samples.
+    start_u, start_v = np.empty(segments), np.empty(segments)
+    along_u, along_v, inverse_length_squared = np.empty(segments), np.empty(segments), np.empty(segments)
+    for segment in range(segments):
+        a, b = start_index[segment], end_index[segment]
+        start_u[segment], start_v[segment] = end_pixels[a, 0], end_pixels[a, 1]
+        along_u[segment] = end_pixels[b, 0] - end_pixels[a, 0]
+        along_v[segment] = end_pixels[b, 1] - end_pixels[a, 1]
+        inverse_length_squared[segment] = 1.0 / max(along_u[segment] ** 2 + along_v[segment] ** 2, 1e-12)
     for i in range(count):
         su, sv = samples[i, 0], samples[i, 1]
         best = np.inf
@@ -192,16 +243,12 @@ def axis_value_and_pixel_gradient(samples, end_pixels, start_index, end_index, s
         best_u = 0.0
         best_v = 0.0
         for segment in range(segments):
-            a, b = start_index[segment], end_index[segment]
-            start_u, start_v = end_pixels[a, 0], end_pixels[a, 1]
-            along_u = end_pixels[b, 0] - start_u
-            along_v = end_pixels[b, 1] - start_v
-            length_squared = max(along_u * along_u + along_v * along_v, 1e-12)
-            offset_u = su - start_u
-            offset_v = sv - start_v
-            s = min(max((offset_u * along_u + offset_v * along_v) / length_squared, 0.0), 1.0)
-            offset_u -= s * along_u  # the residual: sample minus closest point
-            offset_v -= s * along_v
+            offset_u = su - start_u[segment]
+            offset_v = sv - start_v[segment]
+            s = (offset_u * along_u[segment] + offset_v * along_v[segment]) * inverse_length_squared[segment]
+            s = min(max(s, 0.0), 1.0)
+            offset_u -= s * along_u[segment]  # the residual: sample minus closest point
+            offset_v -= s * along_v[segment]
             distance_squared = offset_u * offset_u + offset_v * offset_v
             if distance_squared < best:
                 best, best_segment, best_s, best_u, best_v = distance_squared, segment, s, offset_u, offset_v
