@@ -10,13 +10,15 @@ Measures in one run:
   step with the image term and of one without (timed around HierarchicalQPSolver.compute_step);
 - Pink (`pip install -e '.[bench]'`; skipped without it): one IK step toward the same targets from
   the same configurations (each frame's targets from the previous frame's solution), DAQP and
-  ProxQP, position tasks on the same keypoint frames, a posture task, limits in Pink's QP;
+  ProxQP, position tasks on the same keypoint frames, a posture task, limits in Pink's QP; our timed
+  run and Pink's steps alternate over --rounds rounds, and each ratio is the median of the rounds'
+  (the machine's speed drifts between runs);
 - the time split of the qp run with 2 views by part (cProfile's own times grouped by function), and
   the process's peak memory.
 
 A benchmark, not a test: absolute times on a shared 2-core machine are indicative, ratios less so.
 
-Usage: python experiments/benchmark.py --out out/benchmark [--json PATH] [--frames 120]
+Usage: python experiments/benchmark.py --out out/benchmark [--json PATH] [--frames 120] [--rounds 3]
 """
 
 from __future__ import annotations
@@ -121,7 +123,6 @@ def whole_body(frames: int, cache: Path) -> tuple[dict, dict, cProfile.Profile]:
     """`ibik track` per scheme and view count; the qp 2-view run profiled and its steps timed."""
     inputs = prepare_inputs(BOXING, DATA, frames, cache)
     results: dict = {scheme: {} for scheme in SCHEMES}
-    steps = StepTimer()
     profile = cProfile.Profile()
     out = cache.parent / "benchmark_runs"
     for views in (2, 4):
@@ -131,17 +132,47 @@ def whole_body(frames: int, cache: Path) -> tuple[dict, dict, cProfile.Profile]:
             results[scheme][f"views_{views}"] = {"fps": run.solve_fps, "judged_error_mm": run.judged_mm,
                                                  "wall_s": run.wall_seconds,
                                                  "mean_iterations_per_frame": _mean_iterations(folder)}
-    # Once more, timed step by step and profiled (both slow it down, so its frame rate is not the one reported).
-    with steps.active():
-        profile.enable()
-        run_variant(inputs, variant("ibik2v"), "clean", {"method": "qp"}, out=out / "qp_2v_profiled")
-        profile.disable()
+    # Once more profiled, apart from the timed steps (step_rounds): the profiler's cost per call,
+    # several times a small numpy call's, would weigh on our steps and not on Pink's.
+    profile.enable()
+    run_variant(inputs, variant("ibik2v"), "clean", {"method": "qp"}, out=out / "qp_2v_profiled")
+    profile.disable()
     blind = run_variant(inputs, variant("pik"), "clean", out=out / "pik")
     results["pik"] = {"fps": blind.solve_fps, "judged_error_mm": blind.judged_mm}
-    results["qp"]["views_2"]["step_with_image_us"] = steps.median_us(steps.image)
-    results["qp"]["views_2"]["step_without_image_us"] = steps.median_us(steps.blind)
-    results["qp"]["views_2"]["steps_per_frame"] = (len(steps.image) + len(steps.blind)) / frames
     return results, {"inputs": inputs, "q_run": out / "qp_2v"}, profile
+
+
+def step_rounds(inputs, run_folder: Path, frames: int, rounds: int) -> tuple[dict, dict, dict]:
+    """Our qp steps (2 views) and Pink's, measured in turn `rounds` times: the machine's speed
+    drifts by up to 2x between runs, so each round's ratio compares figures taken together.
+
+    Returns our steps (medians over the rounds), Pink's (the same) and the ratios (each the median
+    of the rounds' ratios, with every round's)."""
+    ours_rounds, pink_rounds = [], []
+    for round_index in range(rounds):
+        steps = StepTimer()
+        with steps.active():
+            run_variant(inputs, variant("ibik2v"), "clean", {"method": "qp"},
+                        out=run_folder.parent / f"qp_2v_timed_{round_index}")
+        ours_rounds.append({"step_with_image_us": steps.median_us(steps.image),
+                            "step_without_image_us": steps.median_us(steps.blind),
+                            "steps_per_frame": (len(steps.image) + len(steps.blind)) / frames})
+        pink_rounds.append(pink_steps(inputs, run_folder, frames))
+    ours = {key: float(np.median([row[key] for row in ours_rounds])) for key in ours_rounds[0]}
+    ratios: dict = {}
+    pink: dict = pink_rounds[0] if "skipped" in pink_rounds[0] else {}
+    for backend in ("daqp", "proxqp"):
+        if backend not in pink_rounds[0]:
+            continue
+        pink[backend] = {"step_us": float(np.median([row[backend]["step_us"] for row in pink_rounds])),
+                         "failed_steps": sum(row[backend]["failed_steps"] for row in pink_rounds),
+                         "steps": sum(row[backend]["steps"] for row in pink_rounds)}
+        for kind in ("image", "blind"):
+            per_round = [mine[f"step_with{'out' if kind == 'blind' else ''}_image_us"] / row[backend]["step_us"]
+                         for mine, row in zip(ours_rounds, pink_rounds, strict=True)]
+            ratios[f"qp_{kind}_step_over_pink_{backend}_step"] = float(np.median(per_round))
+            ratios[f"qp_{kind}_step_over_pink_{backend}_step_rounds"] = per_round
+    return ours, pink, ratios
 
 
 def _mean_iterations(run_folder: Path) -> float | None:
@@ -201,6 +232,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--json", type=Path, help="where the figures go (default: OUT/benchmark.json)")
     parser.add_argument("--frames", type=int, default=120)
+    parser.add_argument("--rounds", type=int, default=3, help="our steps and Pink's, timed in turn (default 3)")
     parser.add_argument("--cache", type=Path, help="where the rendered inputs are kept (default: OUT/cache; the "
                         "real-mocap benchmark's cache is reused when given)")
     arguments = parser.parse_args()
@@ -208,14 +240,10 @@ def main() -> None:
     started = time.perf_counter()
     arm = arm_fps(arguments.frames)
     body, context, profile = whole_body(arguments.frames, arguments.cache or arguments.out / "cache")
-    pink_results = pink_steps(context["inputs"], context["q_run"], arguments.frames)
+    steps, pink_results, ratios = step_rounds(context["inputs"], context["q_run"], arguments.frames,
+                                              arguments.rounds)
     ours = body["qp"]["views_2"]
-    ratios = {}
-    for backend in ("daqp", "proxqp"):
-        if backend in pink_results and ours["step_with_image_us"]:
-            pink_step = pink_results[backend]["step_us"]
-            ratios[f"qp_image_step_over_pink_{backend}_step"] = ours["step_with_image_us"] / pink_step
-            ratios[f"qp_blind_step_over_pink_{backend}_step"] = ours["step_without_image_us"] / pink_step
+    ours.update(steps)
     figures = {"arm": arm, "whole_body": body, "pink": pink_results, "ratios": ratios,
                "split_qp_2_views_s": time_split(profile),
                "peak_memory_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
@@ -238,7 +266,8 @@ def main() -> None:
     lines += ["", "| part of the profiled qp run, 2 views (own time; numpy's small-array calls in \"other\") | [s] |",
               "| --- | ---: |"]
     lines += [f"| {part} | {seconds:.2f} |" for part, seconds in figures["split_qp_2_views_s"].items()]
-    lines += ["", f"ratios: {', '.join(f'{k} {v:.2f}' for k, v in ratios.items())}; steps per frame "
+    lines += ["", f"ratios (median of {arguments.rounds} rounds): "
+              f"{', '.join(f'{k} {v:.2f}' for k, v in ratios.items() if not k.endswith('_rounds'))}; steps per frame "
               f"{ours['steps_per_frame']:.1f}; peak memory {figures['peak_memory_mb']:.0f} MB; "
               f"{figures['wall_s']:.0f} s in all"]
     table = "\n".join(lines)
