@@ -97,3 +97,14 @@ def test_the_compiled_overlap_of_an_orthographic_camera_equals_the_plain_reading
     values, expected_gradient = plain_reading(projection, support)
     assert complete and total == pytest.approx(values.sum(), rel=1e-12)
     np.testing.assert_allclose(gradient, expected_gradient, rtol=1e-10, atol=1e-12)
+
+
+def test_a_nan_pixel_reads_nothing_and_pulls_nowhere():
+    support = SupportImage(silhouette_support().values)
+    pixels = np.array([[320.0, 240.0], [np.nan, 240.0], [300.0, np.nan]])
+    jacobians = np.ones((3, 2, 3))
+    gradient = np.zeros((3, 3))
+    values, row, column = support.held_values()
+    total, complete = support_overlap(pixels, jacobians, np.ones(3), values, row, column, 640, 480, gradient)
+    assert complete and total == pytest.approx(float(support.sample(pixels[:1]).values[0]), rel=1e-12)
+    assert np.isfinite(gradient).all() and not gradient[1:].any()

@@ -33,7 +33,7 @@ MIN_DEPTH = 1e-6
 
 def pinhole_parameters(rotation: np.ndarray, translation: np.ndarray, intrinsics: np.ndarray,
                        distortion_terms) -> np.ndarray:
-    """A pinhole camera's parameters as :func:`pinhole_overlap` reads them, shape (21,): R (row
+    """A pinhole camera's parameters as :func:`pinhole_project` reads them, shape (21,): R (row
     major), t [m], fx, fy, cx, cy [px], k1, k2, p1, p2, k3."""
     return np.concatenate((np.asarray(rotation, dtype=np.float64).ravel(), np.asarray(translation, dtype=np.float64),
                            [intrinsics[0, 0], intrinsics[1, 1], intrinsics[0, 2], intrinsics[1, 2]],
@@ -43,7 +43,10 @@ def pinhole_parameters(rotation: np.ndarray, translation: np.ndarray, intrinsics
 @njit(cache=True, nogil=True)
 def _read_support(u, v, support, row0, column0, width, height):
     """The bilinear support at pixel (u, v) and its derivative (d/du, d/dv); `support` holds the
-    frame's values from (row0, column0) on. Returns (value, d_u, d_v, inside the window)."""
+    frame's values from (row0, column0) on. Returns (value, d_u, d_v, inside the window); a NaN
+    pixel reads 0 and pulls nowhere."""
+    if u != u or v != v:
+        return 0.0, 0.0, 0.0, True
     clipped_u = min(max(u, 0.0), width - 1.0)
     clipped_v = min(max(v, 0.0), height - 1.0)
     # The cell's top-left corner; on the last column/row the cell to its left/above, so that

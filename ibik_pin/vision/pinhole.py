@@ -62,7 +62,7 @@ class PinholeCamera(Camera):
         object.__setattr__(self, "distortion", _read_only(as_finite_array(self.distortion, [(4,), (5,)], "distortion")))
         # The coefficients as Python floats, read at every projection (the same products as numpy's scalars).
         object.__setattr__(self, "_distortion_terms", tuple(float(term) for term in self._coefficients()))
-        # What the image level's compiled loop reads (vision.kernels.pinhole_overlap), built once.
+        # What the compiled projection reads (vision.kernels.pinhole_project), built once.
         object.__setattr__(self, "kernel_parameters", _read_only(pinhole_parameters(
             self.rotation, self.translation, K, self._distortion_terms)))
 
