@@ -8,9 +8,10 @@ in one call per view.
 
 - :func:`pinhole_project`: points through an OpenCV pinhole camera, distortion included, with the
   projection's analytic Jacobian (:class:`ibik_pin.vision.pinhole.PinholeCamera` projects with it).
-- :func:`support_overlap`, :func:`support_values`: read a support image at projected points by
-  bilinear interpolation (the arithmetic of :meth:`ibik_pin.vision.support.SupportImage.sample`):
-  their sum and each point's d support / d X_world, or the values alone.
+- :func:`support_sample`, :func:`support_overlap`, :func:`support_values`: read a support image by
+  bilinear interpolation with the interpolant's exact derivative: at pixels
+  (:meth:`ibik_pin.vision.support.SupportImage.sample`), or at projected points, their sum and each
+  point's d support / d X_world, or the values alone.
 - :func:`axis_value_and_pixel_gradient`: the silhouette-axis term of one view and its derivative
   with respect to the projected segment ends; :func:`nearest_squared_distances`: its distances for
   the swivel search's candidates (:mod:`ibik_pin.tasks.silhouette_axis`).
@@ -25,7 +26,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["MIN_DEPTH", "axis_value_and_pixel_gradient", "nearest_squared_distances", "pinhole_parameters",
-           "pinhole_project", "support_overlap", "support_values"]
+           "pinhole_project", "support_overlap", "support_sample", "support_values"]
 
 # A point nearer the camera plane than this [m] is behind it: it reads 0 and pulls nowhere.
 MIN_DEPTH = 1e-6
@@ -117,6 +118,21 @@ def pinhole_project(points, camera, pixels, jacobian, depth):
         (pixels[m, 0], pixels[m, 1], depth[m], jacobian[m, 0, 0], jacobian[m, 0, 1], jacobian[m, 0, 2],
          jacobian[m, 1, 0], jacobian[m, 1, 1], jacobian[m, 1, 2]) = _project_point(
             camera, points[m, 0], points[m, 1], points[m, 2])
+
+
+@njit(cache=True, nogil=True)
+def support_sample(pixels, support, row0, column0, width, height, values, gradient):
+    """The support and its derivative at pixels (M, 2) [px]: writes values (M,) [support units]
+    and gradient (M, 2) d values / d (u, v); `support` as in :func:`support_overlap`.
+
+    Returns complete (False: a pixel read outside `support`, the outputs partly written).
+    """
+    for m in range(pixels.shape[0]):
+        values[m], gradient[m, 0], gradient[m, 1], inside = _read_support(
+            pixels[m, 0], pixels[m, 1], support, row0, column0, width, height)
+        if not inside:
+            return False
+    return True
 
 
 @njit(cache=True, nogil=True)

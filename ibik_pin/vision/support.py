@@ -22,6 +22,7 @@ import numpy as np
 from ibik_pin.checks import as_mask
 from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
 from ibik_pin.vision.distance import box_around, shifted, signed_distance
+from ibik_pin.vision.kernels import support_sample
 
 
 class SupportSample(NamedTuple):
@@ -98,7 +99,7 @@ class SupportImage:
         values.setflags(write=False)
         self._values: np.ndarray | None = values
         self._enabled = bool(enabled)
-        self._set_size((values.shape[1], values.shape[0]))
+        self._size = (values.shape[1], values.shape[0])
         self._window: _Window | None = None
         self._whole_frame: Callable[[], np.ndarray] | None = None
 
@@ -108,16 +109,10 @@ class SupportImage:
         support = cls.__new__(cls)
         support._values = None
         support._enabled = True
-        support._set_size(size)
+        support._size = size
         support._window = window
         support._whole_frame = whole_frame
         return support
-
-    def _set_size(self, size: tuple[int, int]) -> None:
-        width, height = size
-        self._size = size
-        self._last_pixel = np.array([[width - 1.0], [height - 1.0]])  # (2, 1) [px]
-        self._last_cell = np.array([[max(width - 2, 0)], [max(height - 2, 0)]])  # where the last cells start
 
     @property
     def values(self) -> np.ndarray:
@@ -181,36 +176,12 @@ class SupportImage:
             :class:`SupportSample` with values (N,) and gradient (N, 2) d values / d (u, v).
         """
         pixels = _as_pixels(pixels)
-        width, height = self.size
-        # Rows u and v of (2, N) arrays, each contiguous: few numpy calls (a sample is a few
-        # microseconds per call), each on contiguous rows.
-        clipped = np.minimum(np.maximum(pixels.T, 0.0, order="C"), self._last_pixel)
-        # Cell corner (column0, row0); on the last column/row use the cell to its left/above,
-        # so that u = W - 1 interpolates with weight 1 on the last pixel.
-        cell = np.minimum(clipped.astype(np.intp), self._last_cell)
-        fraction_u, fraction_v = clipped - cell
-        # Offsets of the right and lower corners (a one-pixel-wide or -high image repeats its
-        # column or row).
-        right, down = min(width - 1, 1), min(height - 1, 1)
-        window = self._window
-        if window is not None and window.holds(cell, right, down):
-            values, stride = window.values, window.values.shape[1]
-            origin = window.row * stride + window.column  # the window's first pixel in the frame
-        else:
-            values, stride, origin = self.values, width, 0
-        # The four corners in one gather: top left, bottom left, top right, bottom right.
-        offsets = np.array([[-origin], [down * stride - origin], [right - origin], [down * stride + right - origin]])
-        corners = values.ravel().take(cell[1] * stride + cell[0] + offsets).astype(np.float64)
-        across = corners[2:] - corners[:2]  # top right - top left, bottom right - bottom left
-        top, bottom = corners[:2] + fraction_u * across
-        values = top + fraction_v * (bottom - top)
-        gradient = np.empty((2, pixels.shape[0]))
-        np.multiply(1.0 - fraction_v, across[0], out=gradient[0])
-        gradient[0] += fraction_v * across[1]
-        np.subtract(bottom, top, out=gradient[1])
-        # Zero along an axis where the clip moved the point (outside the image).
-        gradient *= clipped == pixels.T
-        return SupportSample(values, gradient.T)
+        values, gradient = np.empty(len(pixels)), np.empty((len(pixels), 2))
+        for whole_frame in (False, True):  # the window around the body, unless a pixel falls outside
+            held, row, column = self.held_values(whole_frame)
+            if support_sample(pixels, held, row, column, *self.size, values, gradient):
+                break
+        return SupportSample(values, gradient)
 
 
 
@@ -318,16 +289,6 @@ class _Window:
     values: np.ndarray
     row: int
     column: int
-
-    def holds(self, cells: np.ndarray, right: int, down: int) -> bool:
-        """Whether every pixel cell from corner (column0, row0) (2, N) to (column0 + right,
-        row0 + down) lies within."""
-        height, width = self.values.shape
-        if cells.shape[1] == 0:
-            return True
-        first, last = np.minimum.reduce(cells, axis=1), np.maximum.reduce(cells, axis=1)
-        return bool(first[0] >= self.column and last[0] + right < self.column + width
-                    and first[1] >= self.row and last[1] + down < self.row + height)
 
 
 def _window_around(box: tuple[slice, slice], shape: tuple[int, int],
