@@ -46,10 +46,10 @@ from ibik_pin.tracking.tracker import Tracker, TrackingResult, TrackingSettings
 from ibik_pin.tracking.video_inputs import (
     SEGMENTERS,
     SilhouetteQuality,
+    SilhouetteQualityReader,
     TriangulationReport,
     read_videos,
     restrict_to_subject,
-    silhouette_quality,
 )
 from ibik_pin.vision.camera import cameras_in_frame, select_cameras
 from ibik_pin.vision.extrinsics_refit import ExtrinsicsRefit
@@ -272,19 +272,19 @@ def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
     targets_m = axes.to_model(targets_trc_m)
     # Every keypoint scales the segments, tracked or not.
     body = prepare_body(job, names, targets_m, calibrate_on_targets=videos.triangulation is not None)
-    silhouette_report = None
+    reader = None  # the silhouettes, each frame's read once for the tracker and the report
     if silhouettes is not None:
         if silhouettes.video_masks is not None:
             restrict_to_subject(silhouettes.video_masks, cameras, targets_m)
-        silhouette_report = silhouette_quality(videos.segmenter, cameras, silhouettes.frame, targets_m)
+        reader = SilhouetteQualityReader(silhouettes.frame, cameras, targets_m)
     tracked = [index for index, name in enumerate(names) if name not in videos.left_to_image]
 
     tracker = Tracker(body, cameras if use_image else [], job.settings)
     job = replace(job, settings=tracker.settings)  # as solved: a stack's image task may set the criterion
     with tqdm(total=frame_count, desc="tracking", unit="frame", disable=True if job.quiet else None) as bar:
         result = tracker.track([names[index] for index in tracked], targets_m[:, tracked],
-                               silhouettes.frame if use_image and silhouettes is not None else None,
-                               progress=bar.update)
+                               reader if use_image else None, progress=bar.update)
+    silhouette_report = reader.quality(videos.segmenter) if reader is not None else None
 
     return write_outputs(staging, job, trc, body, cameras, silhouettes, result, axes, outliers[:, tracked],
                          silhouette_report=silhouette_report, triangulation_report=videos.triangulation,

@@ -33,8 +33,9 @@ if TYPE_CHECKING:
     from ibik_pin.tracking.pipeline import TrackJob
 
 __all__ = ["LIMB_KEYPOINTS", "REFITTED_CALIBRATION", "SEGMENTERS", "TRIANGULATED_TRC", "SilhouetteQuality",
-           "TriangulationReport", "VideoSources", "detect_videos", "keep_subject", "points_inside", "read_videos",
-           "refitted_cameras", "resolve_segmenter", "restrict_to_subject", "silhouette_quality", "triangulated_trc"]
+           "SilhouetteQualityReader", "TriangulationReport", "VideoSources", "detect_videos", "keep_subject",
+           "points_inside", "read_videos", "refitted_cameras", "resolve_segmenter", "restrict_to_subject",
+           "triangulated_trc"]
 
 SEGMENTERS = ("auto", "mediapipe", "mog2")
 # How far outside a mask a projected target may fall and still claim the part it touches [m]:
@@ -314,21 +315,47 @@ def points_inside(camera, mask: np.ndarray, points: np.ndarray) -> np.ndarray:
     return hits
 
 
-def silhouette_quality(segmenter: str, cameras: Sequence, masks_of_frame, targets_m: np.ndarray) -> SilhouetteQuality:
-    """SilhouetteQuality over the frames; `masks_of_frame(f)` gives frame f's masks, one per camera,
-    `targets_m` (F, T, 3) the targets in the frame the cameras project."""
-    quality = SilhouetteQuality(segmenter)
-    inside = np.full((len(targets_m), len(cameras)), np.nan)
-    areas = np.zeros((len(targets_m), len(cameras)), dtype=int)
-    for frame, points in enumerate(targets_m):
-        present = np.isfinite(points).all(axis=1)
-        for index, (camera, mask) in enumerate(zip(cameras, masks_of_frame(frame), strict=True)):
-            areas[frame, index] = int(np.count_nonzero(mask))
-            if present.any():
-                inside[frame, index] = points_inside(camera, mask, points[present]).mean()
-    for index, camera in enumerate(cameras):
-        column = inside[:, index]
-        quality.targets_inside_per_view[camera.name] = [None if np.isnan(v) else float(v) for v in column]
-        quality.targets_inside_mean[camera.name] = float(np.nanmean(column)) if np.isfinite(column).any() else None
-        quality.mask_area_per_view[camera.name] = [int(area) for area in areas[:, index]]
-    return quality
+class SilhouetteQualityReader:
+    """Reads frames' silhouettes for the tracker and keeps, from the first reading of each frame,
+    what SilhouetteQuality reports of it: each mask file is then decoded once, not once for the
+    report and again for the tracking.
+
+    Args:
+        masks_of_frame: frame index -> its masks, one per camera.
+        cameras: the cameras, in the masks' order.
+        targets_m: (F, T, 3) the targets in the frame the cameras project [m].
+    """
+
+    def __init__(self, masks_of_frame, cameras: Sequence, targets_m: np.ndarray) -> None:
+        self._masks_of_frame = masks_of_frame
+        self._cameras = list(cameras)
+        self._targets_m = targets_m
+        self._inside = np.full((len(targets_m), len(self._cameras)), np.nan)
+        self._areas = np.zeros((len(targets_m), len(self._cameras)), dtype=int)
+        self._read = np.zeros(len(targets_m), dtype=bool)
+
+    def __call__(self, frame: int) -> list[np.ndarray]:
+        """Frame `frame`'s masks, one per camera."""
+        masks = self._masks_of_frame(frame)
+        if not self._read[frame]:
+            points = self._targets_m[frame]
+            present = np.isfinite(points).all(axis=1)
+            for index, (camera, mask) in enumerate(zip(self._cameras, masks, strict=True)):
+                self._areas[frame, index] = int(np.count_nonzero(mask))
+                if present.any():
+                    self._inside[frame, index] = points_inside(camera, mask, points[present]).mean()
+            self._read[frame] = True
+        return masks
+
+    def quality(self, segmenter: str) -> SilhouetteQuality:
+        """SilhouetteQuality over every frame (those not read yet are read now)."""
+        for frame in np.flatnonzero(~self._read):
+            self(int(frame))
+        quality = SilhouetteQuality(segmenter)
+        for index, camera in enumerate(self._cameras):
+            column = self._inside[:, index]
+            quality.targets_inside_per_view[camera.name] = [None if np.isnan(v) else float(v) for v in column]
+            quality.targets_inside_mean[camera.name] = (float(np.nanmean(column)) if np.isfinite(column).any()
+                                                        else None)
+            quality.mask_area_per_view[camera.name] = [int(area) for area in self._areas[:, index]]
+        return quality
