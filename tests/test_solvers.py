@@ -258,7 +258,8 @@ def test_the_active_set_method_finds_the_qp_optimum_of_every_seeded_level():
     """Against every active set tried in turn (3 variables, 6 bounds), and against proxsuite and its
     polish (the active-set method off) on larger levels; each level's unconstrained optimum breaks
     a bound."""
-    from ibik_pin.solvers.hqp import _primal_active_set
+    from ibik_pin.solvers.active_set import primal_active_set
+    from ibik_pin.solvers.hqp import _FEASIBILITY
 
     rng = np.random.default_rng(11)
     solver = HierarchicalQPSolver(active_set=False)
@@ -269,7 +270,7 @@ def test_the_active_set_method_finds_the_qp_optimum_of_every_seeded_level():
         values = constraint @ unconstrained
         if np.all((values >= lower) & (values <= upper)):
             continue
-        w = _primal_active_set(hessian, linear, constraint, lower, upper)
+        w = primal_active_set(hessian, linear, constraint, lower, upper, _FEASIBILITY)
         assert w is not None
         solved += 1
         if reference == "enumeration":
