@@ -6,6 +6,7 @@ import itertools
 
 import numpy as np
 import pinocchio as pin
+from numba import njit
 
 from ibik_pin.exceptions import InputError
 
@@ -13,11 +14,29 @@ _WORLD_ALIGNED = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 _KINEMATIC_STATES = itertools.count(1)  # one number per update, unique across all configurations
 
 
+@njit(cache=True, nogil=True)
+def _fill_translation_jacobians(jacobians, positions, joint_jacobians, moved_by, frame_ids):
+    """jacobians[f] (3, nv) = J_v - p_f x J_w over the coordinates that move frame f, for each f of
+    frame_ids, with p_f = positions[f]."""
+    nv = joint_jacobians.shape[1]
+    for f in frame_ids:
+        x, y, z = positions[f, 0], positions[f, 1], positions[f, 2]
+        for v in range(nv):
+            if not moved_by[f, v]:
+                jacobians[f, 0, v] = jacobians[f, 1, v] = jacobians[f, 2, v] = 0.0
+                continue
+            wx, wy, wz = joint_jacobians[3, v], joint_jacobians[4, v], joint_jacobians[5, v]
+            jacobians[f, 0, v] = joint_jacobians[0, v] - (y * wz - z * wy)
+            jacobians[f, 1, v] = joint_jacobians[1, v] - (z * wx - x * wz)
+            jacobians[f, 2, v] = joint_jacobians[2, v] - (x * wy - y * wx)
+
+
 class Configuration:
     """Model + data + configuration q; forward kinematics and joint Jacobians run once per `update`.
 
-    Frame positions and translation Jacobians are read from the cached data and memoised until the
-    next update, so several tasks asking for the same frame cost one Pinocchio call.
+    A frame's position and translation Jacobian are read from the data at the first request after
+    an update and kept until the next, as is each set of frames asked for (read-only), so the
+    tasks and the image terms asking for the same frames at every step cost one read of each.
 
     Attributes:
         model: the Pinocchio model.
@@ -31,8 +50,20 @@ class Configuration:
         # The frames' placements in data, by reference (they follow every update): reading them
         # spares Pinocchio's vector wrapper, a third of the time of a frame's position.
         self._placements = [self.data.oMf[frame] for frame in range(model.nframes)]
-        self._jacobian_cache: dict[int, np.ndarray] = {}
-        self._stacked_jacobians: dict[bytes, np.ndarray] = {}  # by the frame ids' bytes
+        # Per frame, the velocity coordinates that move it: those of its parent joint's supports.
+        self._moved_by = np.zeros((model.nframes, model.nv), dtype=np.bool_)
+        for frame in range(model.nframes):
+            for joint in model.supports[int(model.frames[frame].parentJoint)][1:]:
+                start = model.joints[joint].idx_v
+                self._moved_by[frame, start:start + model.joints[joint].nv] = True
+        # Every frame's position and Jacobian, valid where read since the last update.
+        self._positions = np.zeros((model.nframes, 3))
+        self._jacobians = np.zeros((model.nframes, 3, model.nv))
+        self._has_position = np.zeros(model.nframes, dtype=bool)
+        self._has_jacobian = np.zeros(model.nframes, dtype=bool)
+        # The arrays handed out since the last update, by the frame ids' bytes (int64).
+        self._position_sets: dict[bytes, np.ndarray] = {}
+        self._jacobian_sets: dict[bytes, np.ndarray] = {}
         self.version = 0  # a new unique number at every update, so tasks can memoise per state
         self.q = pin.neutral(model) if q is None else self._checked(q)
         self.update()
@@ -51,8 +82,10 @@ class Configuration:
             self.q = self._checked(q)
         pin.computeJointJacobians(self.model, self.data, self.q)
         pin.updateFramePlacements(self.model, self.data)
-        self._jacobian_cache.clear()
-        self._stacked_jacobians.clear()
+        self._has_position[:] = False
+        self._has_jacobian[:] = False
+        self._position_sets.clear()
+        self._jacobian_sets.clear()
         self.version = next(_KINEMATIC_STATES)
 
     @property
@@ -64,29 +97,44 @@ class Configuration:
         return self._placements[frame_id].translation
 
     def frame_positions(self, frame_ids: np.ndarray) -> np.ndarray:
-        """World positions [m] of several frame origins, shape (K, 3)."""
-        placements = self._placements
-        return np.array([placements[i].translation for i in frame_ids]).reshape(-1, 3)
+        """World positions [m] of several frame origins, shape (K, 3), read-only."""
+        frame_ids = np.asarray(frame_ids).reshape(-1)
+        key = frame_ids.tobytes()
+        positions = self._position_sets.get(key)
+        if positions is None:
+            missing = frame_ids[~self._has_position[frame_ids]]
+            if missing.size:
+                placements = self._placements
+                self._positions[missing] = [placements[frame].translation for frame in missing]
+                self._has_position[missing] = True
+            positions = self._position_sets[key] = self._positions[frame_ids]
+            positions.setflags(write=False)
+        return positions
 
     def frame_translation_jacobian(self, frame_id: int) -> np.ndarray:
-        """d(frame origin in world)/dv, world-aligned, shape (3, nv) [m per unit of v]."""
-        jacobian = self._jacobian_cache.get(frame_id)
-        if jacobian is None:
-            jacobian = pin.getFrameJacobian(self.model, self.data, frame_id, _WORLD_ALIGNED)[:3]
-            self._jacobian_cache[frame_id] = jacobian
-        return jacobian
+        """d(frame origin in world)/dv, world-aligned, shape (3, nv) [m per unit of v], read-only."""
+        return self.frame_translation_jacobians(np.array([frame_id]))[0]
 
     def frame_translation_jacobians(self, frame_ids: np.ndarray) -> np.ndarray:
-        """Translation Jacobians of several frames, shape (K, 3, nv), read-only (memoised: the image
-        terms ask for the same frames at every step)."""
-        frame_ids = np.asarray(frame_ids)
-        key = frame_ids.tobytes() + frame_ids.dtype.str.encode()
-        stacked = self._stacked_jacobians.get(key)
-        if stacked is None:
-            stacked = np.stack([self.frame_translation_jacobian(int(i)) for i in frame_ids.reshape(-1)])
-            stacked.setflags(write=False)
-            self._stacked_jacobians[key] = stacked
-        return stacked
+        """Translation Jacobians of several frames, world-aligned, shape (K, 3, nv), read-only.
+
+        From the joint Jacobians (computeJointJacobians' data.J: each joint's twist at the world
+        origin, J = [J_v; J_w]), in one compiled loop: a frame at p moves at J_v - p x J_w over the
+        coordinates of its supporting joints. Pinocchio's getFrameJacobian (LOCAL_WORLD_ALIGNED)
+        computes the same, one frame per call.
+        """
+        frame_ids = np.asarray(frame_ids).reshape(-1)
+        key = frame_ids.tobytes()
+        jacobians = self._jacobian_sets.get(key)
+        if jacobians is None:
+            missing = frame_ids[~self._has_jacobian[frame_ids]]
+            if missing.size:
+                self.frame_positions(missing)
+                _fill_translation_jacobians(self._jacobians, self._positions, self.data.J, self._moved_by, missing)
+                self._has_jacobian[missing] = True
+            jacobians = self._jacobian_sets[key] = self._jacobians[frame_ids]
+            jacobians.setflags(write=False)
+        return jacobians
 
     def integrate(self, dq: np.ndarray) -> np.ndarray:
         """q (+) dq on the configuration manifold (free-flyer quaternion included), shape (nq,)."""

@@ -4,6 +4,7 @@ import pytest
 
 from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError
+from ibik_pin.model import load_arm
 from tests.conftest import random_human_configuration
 
 
@@ -59,13 +60,33 @@ def test_frame_positions_follow_every_update_as_pinocchio_gives_them(human, rng)
         assert np.array_equal(configuration.frame_position(int(frames[-1])), expected[-1])
 
 
-def test_stacked_frame_jacobians_are_memoised_read_only_until_the_next_update(human, rng):
+def test_frame_jacobians_are_pinocchios_for_every_frame_and_follow_updates(human, rng):
+    """All at once from the joint Jacobians, as getFrameJacobian (LOCAL_WORLD_ALIGNED) gives them one
+    frame at a time, on the free-flyer human and the fixed-base arm; a single frame's too."""
+    arm = load_arm()
+    for body in (human, arm):
+        configuration = Configuration(body.model)
+        frames = np.arange(body.model.nframes)
+        for _ in range(5):
+            q = random_human_configuration(body, rng) if body is human else rng.uniform(-2.0, 2.0, arm.model.nq)
+            configuration.update(q)
+            expected = np.stack([pin.getFrameJacobian(body.model, configuration.data, int(frame),
+                                                      pin.LOCAL_WORLD_ALIGNED)[:3] for frame in frames])
+            np.testing.assert_allclose(configuration.frame_translation_jacobians(frames), expected, rtol=0, atol=1e-13)
+            np.testing.assert_allclose(configuration.frame_translation_jacobian(int(frames[-1])), expected[-1],
+                                       rtol=0, atol=1e-13)
+
+
+def test_frame_reads_are_kept_read_only_until_the_next_update(human, rng):
+    """A set of frames asked again gives the same array, which no caller can change; an update
+    gives new positions."""
     configuration = Configuration(human.model, random_human_configuration(human, rng))
-    frames = human.frame_ids(["LWrist", "Head", "RBigToe"])
-    first = configuration.frame_translation_jacobians(frames)
-    assert configuration.frame_translation_jacobians(frames) is first and not first.flags.writeable
-    q = random_human_configuration(human, rng)
-    configuration.update(q)
-    expected = np.stack([pin.getFrameJacobian(human.model, configuration.data, int(frame),
-                                              pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)[:3] for frame in frames])
-    assert np.array_equal(configuration.frame_translation_jacobians(frames), expected)
+    frames = human.frame_ids(["LWrist", "Head"])
+    for read in (configuration.frame_positions, configuration.frame_translation_jacobians):
+        first = read(frames)
+        assert read(frames) is first
+        with pytest.raises(ValueError, match="read-only"):
+            first[0, 0] = 1.0
+    before = configuration.frame_positions(frames)
+    configuration.update(random_human_configuration(human, rng))
+    assert not np.allclose(configuration.frame_positions(frames), before)

@@ -66,6 +66,31 @@ def test_linear_system_asks_for_minus_gain_times_error(human):
     assert np.allclose(A, 2.0 * task.compute_jacobian(configuration))
 
 
+def test_stacked_position_rows_are_each_tasks_rows_to_the_bit(human, rng):
+    """One read of every frame for a level's position tasks gives what each task gives alone: mixed
+    gains and weights, a task driven by some joints, a repeated frame; a subclass, which may change
+    the error, gets its rows task by task."""
+    configuration = Configuration(human.model, random_human_configuration(human, rng))
+    driven = np.zeros(human.model.nv, dtype=bool)
+    driven[10:20] = True
+    tasks = [FramePositionTask(human.model, name, target=rng.normal(0.0, 0.5, 3), gain=gain, weight=weight,
+                               driven=mask)
+             for name, gain, weight, mask in [("LWrist", 1.0, 1.0, None), ("Head", 0.5, 4.0, None),
+                                              ("RBigToe", 0.8, 0.3, driven), ("LWrist", 0.2, 2.0, None)]]
+    A, b = FramePositionTask.stacked_linear_system(tasks, configuration)
+    rows = [task.compute_linear_system(configuration) for task in tasks]
+    assert np.array_equal(A, np.vstack([rows_A for rows_A, _ in rows]))
+    assert np.array_equal(b, np.concatenate([rows_b for _, rows_b in rows]))
+
+    class Shifted(FramePositionTask):
+        def compute_error(self, configuration):
+            return super().compute_error(configuration) + 1.0
+
+    shifted = [Shifted(human.model, "Head", target=[0.0, 0.0, 1.0])]
+    assert np.array_equal(Shifted.stacked_linear_system(shifted, configuration)[1],
+                          shifted[0].compute_linear_system(configuration)[1])
+
+
 def test_an_unknown_frame_lists_the_available_frames(human):
     with pytest.raises(UnknownNameError, match="available frames: universe, root_joint"):
         FramePositionTask(human.model, "left_hand_tip")

@@ -12,6 +12,7 @@ the adaptation of its image steps (:class:`~ibik_pin.solvers.step_adaptation.Ste
 
 from __future__ import annotations
 
+import itertools
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence, Set
@@ -156,13 +157,17 @@ def build_levels(configuration: Configuration, levels: Levels, adaptation: StepA
                                        task, adaptation))
         elif tasks:
             least_squares = cast(list[Task], tasks)  # no gradient task in this level
-            rows = [task.compute_linear_system(configuration) for task in least_squares]
-            level_rows = LeastSquaresLevel(np.vstack([A for A, _ in rows]), np.concatenate([b for _, b in rows]))
+            blocks = []
+            for _, group in itertools.groupby(least_squares, key=type):  # runs of one class, in order
+                same_class = list(group)
+                blocks.append(type(same_class[0]).stacked_linear_system(same_class, configuration))
+            level_rows = (LeastSquaresLevel(*blocks[0]) if len(blocks) == 1 else
+                          LeastSquaresLevel(np.vstack([A for A, _ in blocks]), np.concatenate([b for _, b in blocks])))
             # NaN rows would turn the whole step, then q, into NaN without a word. One check of the
             # level's rows (tasks are many, each check a few numpy calls), then the culprit named.
             if not (np.isfinite(level_rows.A).all() and np.isfinite(level_rows.b).all()):
-                culprit = next(task for task, (A, b) in zip(least_squares, rows, strict=True)
-                               if not (np.isfinite(A).all() and np.isfinite(b).all()))
+                culprit = next(task for task in least_squares if not all(
+                    np.isfinite(rows).all() for rows in task.compute_linear_system(configuration)))
                 raise SolverError(
                     f"{type(culprit).__name__} gave a non-finite error or Jacobian (NaN or infinity); "
                     "no step can be computed"

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -63,6 +64,15 @@ class Task(ABC):
             scale * self.compute_jacobian(configuration),
             -scale * self.gain * self.compute_error(configuration),
         )
+
+    @classmethod
+    def stacked_linear_system(cls, tasks: Sequence[Task],
+                              configuration: Configuration) -> tuple[np.ndarray, np.ndarray]:
+        """The rows (A, b) of several tasks of this class, stacked in order: each task's
+        compute_linear_system, in one (m, nv) and one (m,). A class whose tasks' rows come faster
+        together (FramePositionTask: one read of every frame's Jacobian) overrides this."""
+        rows = [task.compute_linear_system(configuration) for task in tasks]
+        return np.vstack([A for A, _ in rows]), np.concatenate([b for _, b in rows])
 
 
 class GradientTask(ABC):

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
+from typing import cast
+
 import numpy as np
 import pinocchio as pin
 
@@ -66,3 +70,22 @@ class FramePositionTask(Task):
         if self.driven is None:
             return jacobian
         return np.where(self.driven, jacobian, 0.0)
+
+    @classmethod
+    def stacked_linear_system(cls, tasks: Sequence[Task],
+                              configuration: Configuration) -> tuple[np.ndarray, np.ndarray]:
+        """The tasks' rows from one read of their frames' positions and Jacobians: the rows
+        compute_linear_system gives each, to the bit. A subclass (which may change the error or the
+        Jacobian) gets the rows task by task."""
+        if cls is not FramePositionTask:
+            return super().stacked_linear_system(tasks, configuration)
+        chosen = cast(Sequence[FramePositionTask], tasks)
+        frame_ids = np.array([task.frame_id for task in chosen])
+        scales = np.array([math.sqrt(task.weight) for task in chosen])
+        A = configuration.frame_translation_jacobians(frame_ids) * scales[:, None, None]  # (K, 3, nv)
+        for k, task in enumerate(chosen):
+            if task.driven is not None:
+                A[k][:, ~task.driven] = 0.0
+        errors = configuration.frame_positions(frame_ids) - np.array([task.target for task in chosen])
+        b = np.array([-math.sqrt(task.weight) * task.gain for task in chosen])[:, None] * errors
+        return A.reshape(-1, configuration.nv), b.reshape(-1)
