@@ -356,15 +356,51 @@ def test_a_task_with_nan_rows_raises_a_solver_error_instead_of_a_nan_step(human,
     assert np.isfinite(configuration.q).all()
 
 
-def test_a_failed_svd_is_raised_as_a_solver_error(monkeypatch):
+def test_a_failed_factorisation_is_raised_as_a_solver_error(monkeypatch):
     from ibik_pin.solvers import nullspace
 
-    def failing_svd(matrix):  # LAPACK's status when the SVD does not converge
-        return np.zeros((3, 3)), np.zeros(3), np.zeros((6, 6)), 1
+    def failing_qr(matrix):  # LAPACK's status for an illegal argument
+        return matrix, np.zeros(matrix.shape[1], dtype=np.int32), np.zeros(min(matrix.shape)), None, -1
 
-    monkeypatch.setattr(nullspace, "_svd", failing_svd)
-    with pytest.raises(SolverError, match=r"the SVD of a level's projected Jacobian \(3, 6\) failed"):
+    monkeypatch.setattr(nullspace.lapack, "dgeqp3", failing_qr)
+    with pytest.raises(SolverError, match=r"the QR factorisation of a level's projected Jacobian \(3, 6\) failed"):
         nullspace.damped_solve(np.ones((3, 6)), np.ones(3), DEFAULT_DAMPING)
+
+
+def _svd_damped_solve(projected, residual, damping):
+    """The damped least squares and null space by the SVD, the textbook reference."""
+    u, sigma, vt = np.linalg.svd(projected)
+    rank = int(np.count_nonzero(sigma > 1e-10 * max(1.0, sigma[0] if sigma.size else 0.0)))
+    w = vt[:rank].T @ (sigma[:rank] / (sigma[:rank] ** 2 + damping**2) * (u[:, :rank].T @ residual))
+    return w, vt[rank:].T
+
+
+def test_the_qr_factorisation_gives_the_svds_step_and_null_space(rng):
+    """Wide, square and tall levels, full rank and rank-deficient (repeated and zero rows, a zero
+    column): the same step and the same null space (as a projector) as the SVD, and the last
+    level's Cholesky step the same step."""
+    from ibik_pin.solvers.nullspace import damped_solve, damped_step
+
+    checked = 0
+    for rows, size in [(21, 28), (18, 18), (38, 7), (9, 12), (1, 8), (44, 44), (3, 40)]:
+        for deficiency in range(3):
+            matrix = rng.normal(size=(rows, size))
+            if deficiency == 1 and rows > 2:
+                matrix[-1] = matrix[0] - 2.0 * matrix[1]
+            if deficiency == 2:
+                matrix[0] = 0.0
+                matrix[:, -1] = 0.0
+            residual = rng.normal(size=rows)
+            w, remaining = damped_solve(matrix, residual, DEFAULT_DAMPING)
+            w_svd, remaining_svd = _svd_damped_solve(matrix, residual, DEFAULT_DAMPING)
+            np.testing.assert_allclose(w, w_svd, rtol=0, atol=1e-9 * (1 + np.abs(w_svd).max()))
+            assert remaining.shape == remaining_svd.shape
+            np.testing.assert_allclose(remaining.T @ remaining, np.eye(remaining.shape[1]), atol=1e-12)
+            np.testing.assert_allclose(remaining @ remaining.T, remaining_svd @ remaining_svd.T, atol=1e-10)
+            np.testing.assert_allclose(damped_step(matrix, residual, DEFAULT_DAMPING), w_svd, rtol=0,
+                                       atol=1e-9 * (1 + np.abs(w_svd).max()))
+            checked += 1
+    assert checked == 21
 
 
 def test_a_proxsuite_failure_skips_its_level_and_is_reported_failed(human, monkeypatch):

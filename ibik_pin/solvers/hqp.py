@@ -112,13 +112,14 @@ class HierarchicalQPSolver(Solver):
         dq = np.zeros(nv).clip(lower, upper)
         null_basis = np.eye(nv)
         failed: set[int] = set()
+        last = max((index for index, level in enumerate(built) if level is not None), default=-1)
         for index, level in enumerate(built):
             size = null_basis.shape[1]
             if level is None or size == 0:
                 continue
             # The first level's matrix, over the whole null space, may come back (the trunk hold).
             memo = self._first_level if size == nv else None
-            step = unconstrained_level_step(level, null_basis, dq, self.damping, memo)
+            step = unconstrained_level_step(level, null_basis, dq, self.damping, memo, last=index == last)
             if step is None:
                 continue
             unconstrained, remaining = step
@@ -143,7 +144,8 @@ class HierarchicalQPSolver(Solver):
                     continue
             # proxsuite meets the bounds to eps_abs; clip so the limits hold exactly.
             dq = (dq + null_basis @ w).clip(lower, upper)
-            null_basis = null_basis @ remaining
+            if remaining is not None:
+                null_basis = null_basis @ remaining
         return StepResult(dq, functools.partial(report_levels, built, dq.copy(), failed))
 
     def _solve_level(self, index, hessian, linear, constraint, lower, upper) -> np.ndarray | None:

@@ -69,19 +69,21 @@ class PriorityStackSolver(Solver):
     def _project(self, built: list, dq: np.ndarray, null_basis: np.ndarray) -> np.ndarray:
         """The recursive stack from a partial step dq over the coordinates spanned by null_basis."""
         first = True
-        for level in built:
+        last = max((index for index, level in enumerate(built) if level is not None), default=-1)
+        for index, level in enumerate(built):
             if level is None or null_basis.shape[1] == 0:
                 continue
             # The first level's matrix depends on its rows and the locked joints only: it may come
             # back (the trunk hold).
             memo = self._first_level if first else None
             first = False
-            step = unconstrained_level_step(level, null_basis, dq, self.damping, memo)
+            step = unconstrained_level_step(level, null_basis, dq, self.damping, memo, last=index == last)
             if step is None:
                 continue
             w, remaining = step
             dq += null_basis @ w
-            null_basis = null_basis @ remaining
+            if remaining is not None:
+                null_basis = null_basis @ remaining
         return dq
 
 
