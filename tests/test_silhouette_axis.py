@@ -11,7 +11,7 @@ from ibik_pin.tasks.silhouette_axis import (
     SilhouetteAxisTask,
 )
 from ibik_pin.tasks.weighted_sum import WeightedSum
-from ibik_pin.vision.kernels import axis_value_and_pixel_gradient, nearest_squared_distances
+from ibik_pin.vision.kernels import axis_value_and_pixel_gradient, candidate_axis_values
 from ibik_pin.vision.medial_axis import medial_axis_pixels
 from ibik_pin.vision.pinhole import look_at_camera
 from ibik_pin.vision.render import render_capsules
@@ -184,14 +184,19 @@ def test_the_compiled_axis_term_and_the_vectorised_distances_equal_the_plain_one
         plain = np.array([[min(float(residual @ residual) for _, residual in
                                (_plain_closest(sample, a[k], b[k]) for k in range(3))) for sample in samples]
                           for a, b in zip(starts, ends, strict=True)])
-        nearest = np.empty((7, len(samples)))
-        nearest_squared_distances(samples, starts, ends, np.full(len(samples), np.inf), nearest)
-        np.testing.assert_allclose(nearest, plain, rtol=1e-12, atol=1e-9)
+        values = np.empty(7)
+        candidate_axis_values(samples, starts, ends, np.full(len(samples), np.inf), 15.0, values)
+        np.testing.assert_allclose(values, _robust_values(plain, 15.0), rtol=1e-12)
 
 
-def test_the_candidates_nearest_distances_with_shared_segments_are_the_smaller_of_both(rng):
-    """Samples far from every candidate's segments take the shared segments' distance without
-    computing the candidates' (most of them here: the candidates move in a small box)."""
+def _robust_values(squared_distances, scale):
+    """Per candidate (row), the axis term of its samples' squared distances [px^2]."""
+    return -0.5 * scale * np.mean(1.0 - np.exp(-squared_distances / scale**2), axis=1)
+
+
+def test_the_candidates_axis_values_with_shared_segments_read_the_smaller_distance(rng):
+    """Samples far from every candidate's segments take the shared segments' distance, read once
+    for all candidates (most of them here: the candidates move in a small box)."""
     for _ in range(20):
         samples = rng.uniform(0.0, 640.0, (300, 2))
         starts, ends = rng.uniform(250.0, 330.0, (2, 36, 2, 2))  # 36 candidates of 2 moving segments
@@ -201,9 +206,9 @@ def test_the_candidates_nearest_distances_with_shared_segments_are_the_smaller_o
         plain = np.array([[min(fixed[i], *(float(residual @ residual) for _, residual in
                                            (_plain_closest(sample, a[k], b[k]) for k in range(2))))
                            for i, sample in enumerate(samples)] for a, b in zip(starts, ends, strict=True)])
-        nearest = np.empty((36, len(samples)))
-        nearest_squared_distances(samples, starts, ends, fixed, nearest)
-        np.testing.assert_allclose(nearest, plain, rtol=1e-12, atol=1e-9)
+        values = np.empty(36)
+        candidate_axis_values(samples, starts, ends, fixed, 40.0, values)
+        np.testing.assert_allclose(values, _robust_values(plain, 40.0), rtol=1e-12)
 
 
 def test_values_at_reading_the_pose_equal_those_computing_it_for_every_limb(human, rng):

@@ -128,7 +128,7 @@ class ImageTask(SegmentCriterion):
         gradient_points /= count
         gradient_frames = self._interpolation.T @ gradient_points  # (K, 3)
         jacobians = configuration.frame_translation_jacobians(self._frame_ids)  # (K, 3, nv)
-        gradient = np.einsum("kd,kdv->v", gradient_frames, jacobians)
+        gradient = gradient_frames.reshape(-1) @ jacobians.reshape(-1, jacobians.shape[2])
         self._cache = (value / count, gradient)
         self._cache_version = configuration.version
         return self._cache
@@ -136,7 +136,7 @@ class ImageTask(SegmentCriterion):
     def at_pose(self, frame_positions: np.ndarray) -> list[np.ndarray]:
         """Per view, the support at every sample of the segments placed at `frame_positions` (K, 3)
         (0 behind the camera), shape (1, M)."""
-        return self._support_values(np.einsum("mk,ckd->cmd", self._interpolation, frame_positions[None]))
+        return self._support_values(np.matmul(self._interpolation, frame_positions[None]))
 
     def values_at(self, frame_positions: np.ndarray, moved: np.ndarray | None = None,
                   pose: object | None = None) -> np.ndarray:
@@ -152,11 +152,10 @@ class ImageTask(SegmentCriterion):
             changing = np.any(self._interpolation[:, moved] != 0.0, axis=1)
         candidates = frame_positions.shape[0]
         values = np.zeros(candidates)
-        moving = self._support_values(np.einsum("mk,ckd->cmd", self._interpolation[changing], frame_positions))
+        moving = self._support_values(np.matmul(self._interpolation[changing], frame_positions))
         if not changing.all():
             still = ([at_pose[:, ~changing] for at_pose in known] if known is not None else
-                     self._support_values(np.einsum("mk,ckd->cmd", self._interpolation[~changing],
-                                                    frame_positions[:1])))
+                     self._support_values(np.matmul(self._interpolation[~changing], frame_positions[:1])))
         for index in range(len(self._active_views)):
             values += moving[index].sum(axis=1)
             if not changing.all():

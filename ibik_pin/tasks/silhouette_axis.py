@@ -36,7 +36,7 @@ from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.tasks.segments import SegmentCriterion, segment_ends
 from ibik_pin.vision.camera import CameraLike, Projection
-from ibik_pin.vision.kernels import axis_value_and_pixel_gradient, nearest_squared_distances
+from ibik_pin.vision.kernels import axis_value_and_pixel_gradient, candidate_axis_values
 from ibik_pin.vision.pinhole import projector
 
 __all__ = ["AxisView", "SilhouetteAxisTask"]
@@ -120,7 +120,7 @@ class SilhouetteAxisTask(SegmentCriterion):
             self._cache = (0.0, np.zeros(configuration.model.nv))
         else:
             jacobians = configuration.frame_translation_jacobians(self._frame_ids)  # (K, 3, nv)
-            gradient = np.einsum("kd,kdv->v", gradient_frames / views, jacobians)
+            gradient = (gradient_frames / views).reshape(-1) @ jacobians.reshape(-1, jacobians.shape[2])
             self._cache = (value / views, gradient)
         self._cache_version = configuration.version
         return self._cache
@@ -161,11 +161,9 @@ class SilhouetteAxisTask(SegmentCriterion):
                 fixed = (at_pose[2][~changing].min(axis=0) if at_pose is not None else
                          _squared_distances(view.pixels, pixels[:1, self._start_index[~changing]],
                                             pixels[:1, self._end_index[~changing]])[0].min(axis=0))
-            nearest = np.empty((candidates, len(view.pixels)))
-            nearest_squared_distances(view.pixels, np.ascontiguousarray(starts), np.ascontiguousarray(ends), fixed,
-                                      nearest)
-            scale = view.robust_scale_px
-            view_values = -0.5 * scale * np.mean(1.0 - np.exp(-nearest / scale**2), axis=1)
+            view_values = np.empty(candidates)
+            candidate_axis_values(view.pixels, np.ascontiguousarray(starts), np.ascontiguousarray(ends), fixed,
+                                  view.robust_scale_px, view_values)
             values += np.where(visible, view_values, 0.0)
             counts += visible
         return values / np.maximum(counts, 1)

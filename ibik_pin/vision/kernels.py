@@ -13,8 +13,8 @@ in one call per view.
   (:meth:`ibik_pin.vision.support.SupportImage.sample`), or at projected points, their sum and each
   point's d support / d X_world, or the values alone.
 - :func:`axis_value_and_pixel_gradient`: the silhouette-axis term of one view and its derivative
-  with respect to the projected segment ends; :func:`nearest_squared_distances`: its distances for
-  the swivel search's candidates (:mod:`ibik_pin.tasks.silhouette_axis`).
+  with respect to the projected segment ends; :func:`candidate_axis_values`: its values at the
+  swivel search's candidates (:mod:`ibik_pin.tasks.silhouette_axis`).
 
 They are compiled on first use and cached on disk (Numba's ``cache=True``), so only the first run
 on a machine pays the compilation (a few seconds).
@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["MIN_DEPTH", "axis_value_and_pixel_gradient", "nearest_squared_distances", "pinhole_parameters",
+__all__ = ["MIN_DEPTH", "axis_value_and_pixel_gradient", "candidate_axis_values", "pinhole_parameters",
            "pinhole_project", "support_overlap", "support_sample", "support_values"]
 
 # A point nearer the camera plane than this [m] is behind it: it reads 0 and pulls nowhere.
@@ -184,33 +184,37 @@ def support_values(pixels, depth, support, row0, column0, width, height, behind,
 
 
 @njit(cache=True, nogil=True)
-def nearest_squared_distances(samples, starts, ends, fixed, nearest):
-    """Per candidate, each sample's squared distance [px^2] to the nearest of its segments or
-    `fixed`, whichever is smaller.
+def candidate_axis_values(samples, starts, ends, fixed, scale, values):
+    """The silhouette-axis term of one view for each candidate placement of some segments:
+    -mean over samples of c/2 (1 - exp(-(d/c)^2)), d a sample's distance to the nearest of the
+    candidate's segments or of the segments every candidate shares, c = `scale`.
 
     Args:
         samples: (N, 2) [px]; starts, ends: (C, S, 2) the candidates' segment ends [px];
-        fixed: (N,) the squared distance to segments every candidate shares [px^2] (inf: none).
-        nearest: (C, N) written.
+        fixed: (N,) the squared distance to the shared segments [px^2] (inf: none);
+        scale: c [px]; values: (C,) written [px].
 
     A sample whose `fixed` distance is below its distance to the box of every candidate's ends is
-    skipped (no segment can come nearer): the candidates move one joint, most samples lie far.
+    read once for all candidates (no segment can come nearer): the candidates move one joint, most
+    samples lie far.
     """
     candidates, segments = starts.shape[0], starts.shape[1]
+    inverse_scale_squared = 1.0 / (scale * scale)
     low_u, low_v, high_u, high_v = np.inf, np.inf, -np.inf, -np.inf
     for c in range(candidates):
+        values[c] = 0.0
         for k in range(segments):
             for u, v in ((starts[c, k, 0], starts[c, k, 1]), (ends[c, k, 0], ends[c, k, 1])):
                 low_u, high_u = min(low_u, u), max(high_u, u)
                 low_v, high_v = min(low_v, v), max(high_v, v)
+    shared = 0.0  # the samples read once, for every candidate
     for i in range(samples.shape[0]):
         su, sv = samples[i, 0], samples[i, 1]
         beyond_u = max(low_u - su, su - high_u, 0.0)
         beyond_v = max(low_v - sv, sv - high_v, 0.0)
         # Only where no segment can come nearer; the margin is far above the rounding of either.
         if fixed[i] < (beyond_u * beyond_u + beyond_v * beyond_v) * (1.0 - 1e-9) - 1e-6:
-            for c in range(candidates):
-                nearest[c, i] = fixed[i]
+            shared += 1.0 - np.exp(-fixed[i] * inverse_scale_squared)
             continue
         for c in range(candidates):
             best = fixed[i]
@@ -223,7 +227,9 @@ def nearest_squared_distances(samples, starts, ends, fixed, nearest):
                 offset_u -= s * along_u
                 offset_v -= s * along_v
                 best = min(best, offset_u * offset_u + offset_v * offset_v)
-            nearest[c, i] = best
+            values[c] += 1.0 - np.exp(-best * inverse_scale_squared)
+    for c in range(candidates):
+        values[c] = -0.5 * scale * (values[c] + shared) / max(samples.shape[0], 1)
 
 
 @njit(cache=True, nogil=True)
