@@ -34,9 +34,10 @@ def _fill_translation_jacobians(jacobians, positions, joint_jacobians, moved_by,
 class Configuration:
     """Model + data + configuration q; forward kinematics and joint Jacobians run once per `update`.
 
-    A frame's position and translation Jacobian are read from the data at the first request after
-    an update and kept until the next, as is each set of frames asked for (read-only), so the
-    tasks and the image terms asking for the same frames at every step cost one read of each.
+    The frames asked for are remembered: at the first request after an update, the positions and
+    translation Jacobians of all of them are read at once and kept until the next update, as is
+    each set of frames handed out (read-only). The tasks and image terms of a step, asking for
+    overlapping sets of the same frames at every step, then cost one read of each frame.
 
     Attributes:
         model: the Pinocchio model.
@@ -56,11 +57,12 @@ class Configuration:
             for joint in model.supports[int(model.frames[frame].parentJoint)][1:]:
                 start = model.joints[joint].idx_v
                 self._moved_by[frame, start:start + model.joints[joint].nv] = True
-        # Every frame's position and Jacobian, valid where read since the last update.
+        # The frames ever asked for, and their positions and Jacobians, read at the version given.
+        self._asked = np.zeros(model.nframes, dtype=bool)
+        self._asked_ids = np.zeros(0, dtype=np.int64)
         self._positions = np.zeros((model.nframes, 3))
         self._jacobians = np.zeros((model.nframes, 3, model.nv))
-        self._has_position = np.zeros(model.nframes, dtype=bool)
-        self._has_jacobian = np.zeros(model.nframes, dtype=bool)
+        self._read_version = -1
         # The arrays handed out since the last update, by the frame ids' bytes (int64).
         self._position_sets: dict[bytes, np.ndarray] = {}
         self._jacobian_sets: dict[bytes, np.ndarray] = {}
@@ -82,8 +84,6 @@ class Configuration:
             self.q = self._checked(q)
         pin.computeJointJacobians(self.model, self.data, self.q)
         pin.updateFramePlacements(self.model, self.data)
-        self._has_position[:] = False
-        self._has_jacobian[:] = False
         self._position_sets.clear()
         self._jacobian_sets.clear()
         self.version = next(_KINEMATIC_STATES)
@@ -96,17 +96,27 @@ class Configuration:
         """World position [m] of a frame origin, shape (3,)."""
         return self._placements[frame_id].translation
 
+    def _read(self, frame_ids: np.ndarray) -> None:
+        """Make the positions and Jacobians of frame_ids, and of every frame asked for before,
+        current."""
+        if not self._asked[frame_ids].all():
+            self._asked[frame_ids] = True
+            self._asked_ids = np.flatnonzero(self._asked)
+            self._read_version = -1
+        if self._read_version != self.version:
+            placements = self._placements
+            self._positions[self._asked_ids] = [placements[frame].translation for frame in self._asked_ids]
+            _fill_translation_jacobians(self._jacobians, self._positions, self.data.J, self._moved_by,
+                                        self._asked_ids)
+            self._read_version = self.version
+
     def frame_positions(self, frame_ids: np.ndarray) -> np.ndarray:
         """World positions [m] of several frame origins, shape (K, 3), read-only."""
         frame_ids = np.asarray(frame_ids).reshape(-1)
         key = frame_ids.tobytes()
         positions = self._position_sets.get(key)
         if positions is None:
-            missing = frame_ids[~self._has_position[frame_ids]]
-            if missing.size:
-                placements = self._placements
-                self._positions[missing] = [placements[frame].translation for frame in missing]
-                self._has_position[missing] = True
+            self._read(frame_ids)
             positions = self._position_sets[key] = self._positions[frame_ids]
             positions.setflags(write=False)
         return positions
@@ -127,11 +137,7 @@ class Configuration:
         key = frame_ids.tobytes()
         jacobians = self._jacobian_sets.get(key)
         if jacobians is None:
-            missing = frame_ids[~self._has_jacobian[frame_ids]]
-            if missing.size:
-                self.frame_positions(missing)
-                _fill_translation_jacobians(self._jacobians, self._positions, self.data.J, self._moved_by, missing)
-                self._has_jacobian[missing] = True
+            self._read(frame_ids)
             jacobians = self._jacobian_sets[key] = self._jacobians[frame_ids]
             jacobians.setflags(write=False)
         return jacobians

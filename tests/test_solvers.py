@@ -538,3 +538,18 @@ def test_steps_under_a_held_trunk_are_those_without_the_memo(human, rng, monkeyp
         np.testing.assert_array_equal(step.dq, plain.compute_step(configuration, levels).dq)
         configuration.update(kept.limits.clamp(configuration.integrate(step.dq)))
     assert len(hold_factored) == 1
+
+
+def test_the_compiled_bound_check_is_numpys(rng):
+    """Inside, on the bounds, outside by one coordinate, and NaN (never inside)."""
+    from ibik_pin.solvers.active_set import within_bounds
+
+    lower, upper = -rng.uniform(0.1, 1.0, 44), rng.uniform(0.1, 1.0, 44)
+    cases = [rng.uniform(lower, upper), lower.copy(), upper.copy()]
+    for index, value in [(0, 2.0), (43, -2.0), (20, np.nan)]:
+        outside = rng.uniform(lower, upper)
+        outside[index] = value
+        cases.append(outside)
+    answers = [within_bounds(values, lower, upper) for values in cases]
+    assert answers == [bool((values >= lower).all() and (values <= upper).all()) for values in cases]
+    assert answers == [True, True, True, False, False, False]

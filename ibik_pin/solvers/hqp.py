@@ -32,7 +32,7 @@ import proxsuite
 
 from ibik_pin.configuration import Configuration
 from ibik_pin.limits import JointLimits
-from ibik_pin.solvers.active_set import primal_active_set
+from ibik_pin.solvers.active_set import primal_active_set, within_bounds
 from ibik_pin.solvers.base import (
     DEFAULT_DAMPING,
     GradientLevel,
@@ -124,7 +124,7 @@ class HierarchicalQPSolver(Solver):
                 continue
             unconstrained, remaining = step
             candidate = dq + null_basis @ unconstrained
-            if (candidate >= lower).all() and (candidate <= upper).all():
+            if within_bounds(candidate, lower, upper):
                 w = unconstrained  # no bound active: the QP's optimum is the projection stack's step
             else:
                 if isinstance(level, GradientLevel):

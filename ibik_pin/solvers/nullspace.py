@@ -47,7 +47,9 @@ def _factor(projected: np.ndarray, damping: float) -> tuple[np.ndarray, np.ndarr
     q, _, info = lapack.dorgqr(square, reflectors)
     basis = np.ascontiguousarray(q[:, :rank])
     reduced = basis.T @ projected.T  # (M Q_k)^T = R_k P^T
-    cholesky, info_cholesky = lapack.dpotrf(reduced @ reduced.T + damping**2 * np.eye(rank))
+    normal = reduced @ reduced.T
+    normal.flat[::rank + 1] += damping**2  # the diagonal
+    cholesky, info_cholesky = lapack.dpotrf(normal)
     if info != 0 or info_cholesky != 0:
         raise SolverError(f"the factors of a level's projected Jacobian {projected.shape} failed: LAPACK's "
                           f"orgqr returned {info}, potrf {info_cholesky}")
@@ -115,7 +117,7 @@ def damped_step(projected: np.ndarray, residual: np.ndarray, damping: float) -> 
         normal, right = projected @ projected.T, residual
     else:
         normal, right = projected.T @ projected, projected.T @ residual
-    normal[np.diag_indices_from(normal)] += damping**2
+    normal.flat[::normal.shape[0] + 1] += damping**2  # the diagonal
     _, solution, info = lapack.dposv(normal, right)
     if info != 0:
         raise SolverError(f"the damped normal equations of a level's projected Jacobian {projected.shape} "
