@@ -39,9 +39,12 @@ class FramePositionTask(Task):
         self.frame_id = frame_id(model, frame_name)
         self.driven = None
         if driven is not None:
-            self.driven = np.asarray(driven, dtype=bool)
+            self.driven = np.array(driven, dtype=bool)
             if self.driven.shape != (model.nv,):
                 raise InputError(f"driven: expected a bool mask of shape ({model.nv},), got {self.driven.shape}")
+            self.driven.setflags(write=False)  # its column scales are kept (column_scales)
+        self._nv = model.nv
+        self._column_scales: tuple[float, np.ndarray | None, np.ndarray] | None = None
         self.set_target(target)
 
     def set_target(self, target: np.ndarray | None) -> None:
@@ -81,11 +84,21 @@ class FramePositionTask(Task):
             return super().stacked_linear_system(tasks, configuration)
         chosen = cast(Sequence[FramePositionTask], tasks)
         frame_ids = np.array([task.frame_id for task in chosen])
-        scales = np.array([math.sqrt(task.weight) for task in chosen])
-        A = configuration.frame_translation_jacobians(frame_ids) * scales[:, None, None]  # (K, 3, nv)
-        for k, task in enumerate(chosen):
-            if task.driven is not None:
-                A[k][:, ~task.driven] = 0.0
+        A = configuration.frame_translation_jacobians(frame_ids) * np.array(
+            [task.column_scales() for task in chosen])[:, None, :]  # (K, 3, nv)
         errors = configuration.frame_positions(frame_ids) - np.array([task.target for task in chosen])
         b = np.array([-math.sqrt(task.weight) * task.gain for task in chosen])[:, None] * errors
         return A.reshape(-1, configuration.nv), b.reshape(-1)
+
+    def column_scales(self) -> np.ndarray:
+        """What each Jacobian column of the task's rows is multiplied by, shape (nv,):
+        sqrt(weight) on the driven coordinates, 0 on the others (read-only; kept while weight and
+        driven stay the same objects)."""
+        kept = self._column_scales
+        if kept is None or kept[0] != self.weight or kept[1] is not self.driven:
+            scales = np.full(self._nv, math.sqrt(self.weight))
+            if self.driven is not None:
+                scales[~self.driven] = 0.0
+            scales.setflags(write=False)
+            kept = self._column_scales = (self.weight, self.driven, scales)
+        return kept[2]
