@@ -158,3 +158,28 @@ def test_cameras_without_silhouettes_are_refused(human, sequence):
                             np.array([0.0, 1.0, 0.0]))
     with pytest.raises(InputError, match="the image criterion needs silhouettes"):
         Tracker(human, [camera], fast_settings()).track(TARGETS, targets)
+
+
+def test_the_first_frames_blind_solve_stops_once_converged(human, rng):
+    """From the neutral pose to reachable targets: fewer steps than allowed, the last below the
+    tolerance, and the pose of the full count of steps to a micrometre."""
+    from ibik_pin.limits import JointLimits
+    from ibik_pin.solvers import make_solver
+    from ibik_pin.tasks import FramePositionTask, PostureTask
+    from ibik_pin.tracking.first_frame import BLIND_CONVERGED, solve_first_frame
+
+    goal = Configuration(human.model, random_human_configuration(human, rng, spread=0.3))
+    names = ["LWrist", "RWrist", "LAnkle", "RAnkle", "Head"]
+    targets = [FramePositionTask(human.model, human.keypoints[name], goal.frame_position(human.frame_id(name)))
+               for name in names]
+    start = goal.q.copy()
+    start[7:] = pin.neutral(human.model)[7:]
+    levels = [targets, [PostureTask(human.model, weight=1e-2)]]
+    solver = make_solver("qp", limits=JointLimits(human.model))
+    early = Configuration(human.model, start)
+    result = solve_first_frame(solver, early, levels, None, iterations=100)
+    assert result.iterations < 100 and result.step_norms[-1] < BLIND_CONVERGED
+    full = Configuration(human.model, start)
+    solver.solve(full, levels, iterations=100)
+    keypoints = human.frame_ids(list(human.keypoints))
+    np.testing.assert_allclose(early.frame_positions(keypoints), full.frame_positions(keypoints), atol=1e-6)
