@@ -1,9 +1,9 @@
 """Speed of the solve loop, in the paper's setting and on the whole body, against Pink.
 
 Measures in one run:
-- arm: the paper's 6-DOF arm chain (experiments/paper/section4.py) on a 150-frame boxing window,
-  15 iterations per frame, support images built from 640 x 480 masks every frame, 1 and 2 views,
-  with and without the image term: frames/s;
+- arm: the paper's 6-DOF arm chain (experiments/paper/section4.py) on --frames frames of a boxing
+  window (every second frame), 15 iterations per frame, support images built from 640 x 480 masks
+  every frame, 1 and 2 views, with and without the image term: frames/s;
 - whole body: `ibik track` (the human with a free flyer, subject calibrated on a static trial) on
   real motion (CMU boxing, the real-mocap benchmark's inputs: silhouettes of another body, 640 x 480),
   2 and 4 views, liegeois, stack and qp: report.json's frames/s, and the median time of one solver

@@ -22,7 +22,7 @@ class UnknownNameError(InputError, KeyError):
 
 class SolverError(IbikError, RuntimeError):
     """A numerical solver cannot produce a result: an IK step from non-finite task rows (NaN or
-    infinity) or a failed SVD, a calibration's least squares that failed.
+    infinity) or a failed factorisation, a calibration's least squares that failed.
 
     A proxsuite failure on one level of the hierarchical QP is recoverable and raises nothing: that
     level is skipped for the step and reported "failed" (solvers.LevelReport).

@@ -10,7 +10,7 @@ Without an active bound this is exactly the projection stack's step. Every level
 (w = 0 satisfies it); one whose target the bounds or higher levels forbid ends with a residual,
 reported "relaxed" (the least-squares relaxation).
 
-A level whose unconstrained optimum (the projection stack's step, one SVD away) already respects
+A level whose unconstrained optimum (the projection stack's step, one factorisation away) already respects
 every bound needs no QP. Otherwise a primal active-set method solves it first (from w = 0, which is
 feasible; one KKT solve per bound added or dropped; compiled, :mod:`ibik_pin.solvers.active_set`):
 on real boxing it solved every level, in about 0.04 ms against proxsuite's 0.4 ms, and spared the
