@@ -110,16 +110,20 @@ class Configuration:
                                         self._asked_ids)
             self._read_version = self.version
 
-    def frame_positions(self, frame_ids: np.ndarray) -> np.ndarray:
-        """World positions [m] of several frame origins, shape (K, 3), read-only."""
+    def _handed_out(self, kept: dict[bytes, np.ndarray], values: np.ndarray, frame_ids: np.ndarray) -> np.ndarray:
+        """values[frame_ids], read-only, kept in `kept` until the next update."""
         frame_ids = np.asarray(frame_ids).reshape(-1)
         key = frame_ids.tobytes()
-        positions = self._position_sets.get(key)
-        if positions is None:
+        rows = kept.get(key)
+        if rows is None:
             self._read(frame_ids)
-            positions = self._position_sets[key] = self._positions[frame_ids]
-            positions.setflags(write=False)
-        return positions
+            rows = kept[key] = values[frame_ids]
+            rows.setflags(write=False)
+        return rows
+
+    def frame_positions(self, frame_ids: np.ndarray) -> np.ndarray:
+        """World positions [m] of several frame origins, shape (K, 3), read-only."""
+        return self._handed_out(self._position_sets, self._positions, frame_ids)
 
     def frame_translation_jacobian(self, frame_id: int) -> np.ndarray:
         """d(frame origin in world)/dv, world-aligned, shape (3, nv) [m per unit of v], read-only."""
@@ -133,14 +137,7 @@ class Configuration:
         coordinates of its supporting joints. Pinocchio's getFrameJacobian (LOCAL_WORLD_ALIGNED)
         computes the same, one frame per call.
         """
-        frame_ids = np.asarray(frame_ids).reshape(-1)
-        key = frame_ids.tobytes()
-        jacobians = self._jacobian_sets.get(key)
-        if jacobians is None:
-            self._read(frame_ids)
-            jacobians = self._jacobian_sets[key] = self._jacobians[frame_ids]
-            jacobians.setflags(write=False)
-        return jacobians
+        return self._handed_out(self._jacobian_sets, self._jacobians, frame_ids)
 
     def integrate(self, dq: np.ndarray) -> np.ndarray:
         """q (+) dq on the configuration manifold (free-flyer quaternion included), shape (nq,)."""
