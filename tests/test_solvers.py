@@ -401,6 +401,10 @@ def test_the_qr_factorisation_gives_the_svds_step_and_null_space(rng):
                                        atol=1e-9 * (1 + np.abs(w_svd).max()))
             checked += 1
     assert checked == 21
+    for zero in (np.zeros((3, 6)), np.zeros((5, 2))):  # no direction at all: no step, every direction free
+        w, remaining = damped_solve(zero, np.ones(zero.shape[0]), DEFAULT_DAMPING)
+        assert not w.any() and not damped_step(zero, np.ones(zero.shape[0]), DEFAULT_DAMPING).any()
+        np.testing.assert_allclose(remaining @ remaining.T, np.eye(zero.shape[1]), atol=1e-12)
 
 
 def test_a_proxsuite_failure_skips_its_level_and_is_reported_failed(human, monkeypatch):
