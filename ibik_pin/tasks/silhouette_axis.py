@@ -36,7 +36,7 @@ from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.tasks.segments import SegmentCriterion, segment_ends
 from ibik_pin.vision.camera import CameraLike, Projection
-from ibik_pin.vision.kernels import axis_value_and_pixel_gradient, candidate_axis_values
+from ibik_pin.vision.kernels import MIN_DEPTH, axis_value_and_pixel_gradient, candidate_axis_values
 from ibik_pin.vision.pinhole import projector
 
 __all__ = ["AxisView", "SilhouetteAxisTask"]
@@ -109,7 +109,7 @@ class SilhouetteAxisTask(SegmentCriterion):
         views = 0
         for view, (pixels, projection_jacobian, depth) in zip(self._active_views, self._project(positions),
                                                               strict=True):
-            if not (depth > 1e-6).all():
+            if not (depth > MIN_DEPTH).all():
                 continue  # a segment end behind the camera: its projection means nothing
             views += 1
             pixel_gradient = np.zeros_like(pixels)
@@ -131,7 +131,7 @@ class SilhouetteAxisTask(SegmentCriterion):
         known = []
         for view, (pixels, _, depth) in zip(self._active_views, self._project(frame_positions), strict=True):
             distances = _squared_distances(view.pixels, pixels[None, self._start_index], pixels[None, self._end_index])
-            known.append((pixels, depth > 1e-6, distances[0]))
+            known.append((pixels, depth > MIN_DEPTH, distances[0]))
         return known
 
     def values_at(self, frame_positions: np.ndarray, moved: np.ndarray | None = None,
@@ -184,17 +184,17 @@ def _project_candidates(project: Callable[[np.ndarray], list[Projection]], frame
     pixels (K, 2) and in front (K,) of a pose with those rows)."""
     candidates, frames = frame_positions.shape[:2]
     if moved is None:
-        return [(pixels.reshape(candidates, frames, 2), np.all(depth.reshape(candidates, frames) > 1e-6, axis=1))
+        return [(pixels.reshape(candidates, frames, 2), np.all(depth.reshape(candidates, frames) > MIN_DEPTH, axis=1))
                 for pixels, _, depth in project(frame_positions.reshape(-1, 3))]
     if shared is None:
-        shared = [(pixels, depth > 1e-6) for pixels, _, depth in project(frame_positions[0])]
+        shared = [(pixels, depth > MIN_DEPTH) for pixels, _, depth in project(frame_positions[0])]
     placed = []
     for (shared_pixels, shared_in_front), (moving, _, moving_depth) in zip(
             shared, project(frame_positions[:, moved].reshape(-1, 3)), strict=True):
         pixels = np.repeat(shared_pixels[None], candidates, axis=0)
         pixels[:, moved] = moving.reshape(candidates, len(moved), 2)
         in_front = np.repeat(shared_in_front[None], candidates, axis=0)
-        in_front[:, moved] = moving_depth.reshape(candidates, len(moved)) > 1e-6
+        in_front[:, moved] = moving_depth.reshape(candidates, len(moved)) > MIN_DEPTH
         placed.append((pixels, np.all(in_front, axis=1)))
     return placed
 
