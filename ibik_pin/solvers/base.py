@@ -54,23 +54,14 @@ class LeastSquaresLevel:
 
 @dataclass
 class GradientLevel:
-    """Ascent along a unit direction with a step norm the solver adapts to the direction taken.
-
-    The solver projects `direction` into the null space of the higher levels and calls
-    `step_size_along` with the result once per step (later calls, e.g. after clamping a joint,
-    reuse the first answer).
-    """
+    """Ascent along a unit direction with a step norm the solver adapts to the direction taken
+    (its StepAdaptation, once per step, on the direction projected into the higher levels' null
+    space)."""
 
     direction: np.ndarray  # (nv,) unit gradient, zeros when it vanishes
     value: float  # the criterion h(q) before the step
     task: GradientTask
-    adaptation: StepAdaptation  # the solver's, which keeps the task's step norm across steps
-    step_size: float = 0.0
-
-    def step_size_along(self, taken: np.ndarray) -> float:
-        if self.step_size == 0.0:
-            self.step_size = self.adaptation.adapt(self.task, taken)
-        return self.step_size
+    step_size: float = 0.0  # the norm the step took (0: none)
 
 
 @dataclass
@@ -130,13 +121,12 @@ class SolveResult:
     failed_levels: int = field(default=0)
 
 
-def build_levels(configuration: Configuration, levels: Levels, adaptation: StepAdaptation) -> list:
+def build_levels(configuration: Configuration, levels: Levels) -> list:
     """Evaluate the levels at the configuration: LeastSquaresLevel / GradientLevel / None (empty).
 
     Args:
         configuration: the state the step starts from.
         levels: priority levels, highest first.
-        adaptation: the solver's step adaptation, handed to each gradient level.
 
     Raises:
         InputError: a gradient task shares its level with other tasks.
@@ -154,7 +144,7 @@ def build_levels(configuration: Configuration, levels: Levels, adaptation: StepA
                 )
             task = gradient_tasks[0]
             built.append(GradientLevel(task.compute_direction(configuration), task.compute_value(configuration),
-                                       task, adaptation))
+                                       task))
         elif tasks:
             least_squares = cast(list[Task], tasks)  # no gradient task in this level
             blocks = []

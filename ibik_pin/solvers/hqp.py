@@ -25,24 +25,21 @@ skips that level (reported "failed"), never raises.
 from __future__ import annotations
 
 import functools
-from typing import cast
 
 import numpy as np
 import proxsuite
 
 from ibik_pin.configuration import Configuration
 from ibik_pin.limits import JointLimits
-from ibik_pin.solvers.active_set import primal_active_set, within_bounds
 from ibik_pin.solvers.base import (
     DEFAULT_DAMPING,
-    GradientLevel,
     Levels,
     Solver,
     StepResult,
     build_levels,
     report_levels,
 )
-from ibik_pin.solvers.nullspace import FactorMemo, unconstrained_level_step, unit_reduced_direction
+from ibik_pin.solvers.level_loop import PackedLevels
 
 UNBOUNDED = 1e20  # proxsuite's stand-in for an infinite bound
 # How far [rad, m] the active-set answer may leave a bound: as proxsuite's, a bound on a coordinate
@@ -83,7 +80,6 @@ class HierarchicalQPSolver(Solver):
         self.max_qp_iterations = int(max_qp_iterations)
         self.active_set = bool(active_set)
         self._qps: dict[tuple[int, int, int], object] = {}  # (level, n, n_in) -> QP
-        self._first_level = FactorMemo()
 
     def _qp(self, level: int, n: int, n_in: int):
         """The QP object of this level and size, created once; returns it and whether it is new."""
@@ -103,49 +99,33 @@ class HierarchicalQPSolver(Solver):
         return qp, True
 
     def compute_step(self, configuration: Configuration, levels: Levels) -> StepResult:
-        built = build_levels(configuration, self.arrange(levels), self.step_adaptation)
+        built = build_levels(configuration, self.arrange(levels))
         nv = configuration.nv
         if self.limits is not None:
             lower, upper = self.limits.step_bounds(configuration.q)
         else:
             lower, upper = np.full(nv, -UNBOUNDED), np.full(nv, UNBOUNDED)
-        dq = np.zeros(nv).clip(lower, upper)
-        null_basis = np.eye(nv)
+        packed = PackedLevels(built, self.step_adaptation, nv)
+        dq, null_basis = np.zeros(nv).clip(lower, upper), np.eye(nv)
         failed: set[int] = set()
-        last = max((index for index, level in enumerate(built) if level is not None), default=-1)
-        for index, level in enumerate(built):
-            size = null_basis.shape[1]
-            if level is None or size == 0:
-                continue
-            # The first level's matrix, over the whole null space, may come back (the trunk hold).
-            memo = self._first_level if size == nv else None
-            step = unconstrained_level_step(level, null_basis, dq, self.damping, memo, last=index == last)
-            if step is None:
-                continue
-            unconstrained, remaining = step
-            candidate = dq + null_basis @ unconstrained
-            if within_bounds(candidate, lower, upper):
-                w = unconstrained  # no bound active: the QP's optimum is the projection stack's step
+        start = 0
+        while start < len(built):
+            dq, null_basis, stopped, hessian, linear, remaining = packed.solve(
+                dq, null_basis, lower, upper, bounded=True, active_set=self.active_set, damping=self.damping,
+                feasibility=_FEASIBILITY, start=start)
+            if stopped == len(built):
+                break
+            # The active-set method did not end on this level (or is switched off): proxsuite's turn.
+            w = self._solve_level(stopped, hessian, linear, null_basis, lower - dq, upper - dq)
+            if w is None:
+                failed.add(stopped)  # skipped: its null space is left to the levels below
             else:
-                if isinstance(level, GradientLevel):
-                    hessian = np.eye(size) / level.step_size
-                    # Not None: the level's unconstrained step above found a direction to climb.
-                    linear = -cast(np.ndarray, unit_reduced_direction(null_basis, level.direction))
-                else:
-                    projected = level.A @ null_basis
-                    hessian = projected.T @ projected + self.damping**2 * np.eye(size)
-                    linear = -projected.T @ (level.b - level.A @ dq)
-                w = (primal_active_set(hessian, linear, null_basis, lower - dq, upper - dq, _FEASIBILITY)
-                     if self.active_set else None)
-                if w is None:
-                    w = self._solve_level(index, hessian, linear, null_basis, lower - dq, upper - dq)
-                if w is None:
-                    failed.add(index)
-                    continue
-            # proxsuite meets the bounds to eps_abs; clip so the limits hold exactly.
-            dq = (dq + null_basis @ w).clip(lower, upper)
-            if remaining is not None:
-                null_basis = null_basis @ remaining
+                # proxsuite meets the bounds to eps_abs; clip so the limits hold exactly.
+                dq = (dq + null_basis @ w).clip(lower, upper)
+                if remaining.size:
+                    null_basis = null_basis @ remaining
+            start = stopped + 1
+        packed.finish()
         return StepResult(dq, functools.partial(report_levels, built, dq.copy(), failed))
 
     def _solve_level(self, index, hessian, linear, constraint, lower, upper) -> np.ndarray | None:

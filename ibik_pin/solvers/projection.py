@@ -21,16 +21,14 @@ import functools
 import numpy as np
 
 from ibik_pin.configuration import Configuration
-from ibik_pin.limits import JointLimits
 from ibik_pin.solvers.base import (
-    DEFAULT_DAMPING,
     Levels,
     Solver,
     StepResult,
     build_levels,
     report_levels,
 )
-from ibik_pin.solvers.nullspace import FactorMemo, unconstrained_level_step
+from ibik_pin.solvers.level_loop import PackedLevels
 from ibik_pin.tasks.base import GradientTask, Task
 
 
@@ -41,49 +39,35 @@ class PriorityStackSolver(Solver):
 
     name = "stack"
 
-    def __init__(self, *, limits: JointLimits | None = None, damping: float = DEFAULT_DAMPING) -> None:
-        super().__init__(limits=limits, damping=damping)
-        self._first_level = FactorMemo()
-
     def compute_step(self, configuration: Configuration, levels: Levels) -> StepResult:
-        built = build_levels(configuration, self.arrange(levels), self.step_adaptation)
+        built = build_levels(configuration, self.arrange(levels))
         nv = configuration.nv
+        packed = PackedLevels(built, self.step_adaptation, nv)
         if self.limits is None:
-            dq = self._project(built, np.zeros(nv), np.eye(nv))
-            return StepResult(dq, functools.partial(report_levels, built, dq.copy()))
-        # Joint limits by clamping (Baerlocher & Boulic 2004): a coordinate whose step leaves its
-        # bounds is locked on the bound and taken out of every level, and the stack is solved again.
-        lower, upper = self.limits.step_bounds(configuration.q)
-        locked = np.zeros(nv, dtype=bool)
-        fixed = np.zeros(nv)
-        for _ in range(nv):
-            dq = self._project(built, fixed.copy(), np.eye(nv)[:, ~locked])
-            leaving = ~locked & ((dq < lower) | (dq > upper))
-            if not leaving.any():
-                break
-            fixed[leaving] = np.clip(dq[leaving], lower[leaving], upper[leaving])
-            locked |= leaving
-        dq = np.clip(dq, lower, upper)
+            dq = self._project(packed, np.zeros(nv), np.eye(nv))
+        else:
+            # Joint limits by clamping (Baerlocher & Boulic 2004): a coordinate whose step leaves its
+            # bounds is locked on the bound and taken out of every level, and the stack is solved
+            # again (a gradient level keeps the step norm of its first pass).
+            lower, upper = self.limits.step_bounds(configuration.q)
+            locked = np.zeros(nv, dtype=bool)
+            fixed = np.zeros(nv)
+            for _ in range(nv):
+                dq = self._project(packed, fixed.copy(), np.eye(nv)[:, ~locked])
+                leaving = ~locked & ((dq < lower) | (dq > upper))
+                if not leaving.any():
+                    break
+                fixed[leaving] = np.clip(dq[leaving], lower[leaving], upper[leaving])
+                locked |= leaving
+            dq = np.clip(dq, lower, upper)
+        packed.finish()
         return StepResult(dq, functools.partial(report_levels, built, dq.copy()))
 
-    def _project(self, built: list, dq: np.ndarray, null_basis: np.ndarray) -> np.ndarray:
+    def _project(self, packed: PackedLevels, dq: np.ndarray, null_basis: np.ndarray) -> np.ndarray:
         """The recursive stack from a partial step dq over the coordinates spanned by null_basis."""
-        first = True
-        last = max((index for index, level in enumerate(built) if level is not None), default=-1)
-        for index, level in enumerate(built):
-            if level is None or null_basis.shape[1] == 0:
-                continue
-            # The first level's matrix depends on its rows and the locked joints only: it may come
-            # back (the trunk hold).
-            memo = self._first_level if first else None
-            first = False
-            step = unconstrained_level_step(level, null_basis, dq, self.damping, memo, last=index == last)
-            if step is None:
-                continue
-            w, remaining = step
-            dq += null_basis @ w
-            if remaining is not None:
-                null_basis = null_basis @ remaining
+        unbounded = np.zeros(0)
+        dq, *_ = packed.solve(dq, null_basis, unbounded, unbounded, bounded=False, active_set=False,
+                              damping=self.damping)
         return dq
 
 

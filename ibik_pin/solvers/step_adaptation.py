@@ -7,30 +7,42 @@ and grows by 1.2 (up to `max_step_size`) while it holds.
 
 This state belongs to the solver that takes the steps, not to the task: a task only says what it
 measures and how far one step may go, so the same task object can run through several solvers,
-each adapting its own step.
+each adapting its own step. The rule itself (`adapt_step_size`) is compiled: the solvers' level
+loop (:mod:`ibik_pin.solvers.nullspace`) applies it inside its one compiled call.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
+from numba import njit
 
 from ibik_pin.tasks.base import GradientTask
 
-__all__ = ["StepAdaptation"]
+__all__ = ["StepAdaptation", "adapt_step_size"]
 
 # Rprop's factors (Riedmiller & Braun 1993 use 0.5 and 1.2).
 SHRINK = 0.5
 GROW = 1.2
 
+# The columns of a task's state row.
+STEP_SIZE, MIN_STEP_SIZE, MAX_STEP_SIZE, HAS_PREVIOUS = range(4)
 
-@dataclass
-class _TaskStep:
-    """One gradient task's step norm and the unit direction (nv,) of its previous step."""
 
-    step_size: float
-    previous_direction: np.ndarray | None = None
+@njit(cache=True, nogil=True)
+def adapt_step_size(state, previous, taken):
+    """The step norm along `taken` (nv,) for this iteration, adapted to the previous iteration's.
+
+    `state` is a task's row [step size, min, max, has previous (0/1)] and `previous` (nv,) the
+    direction of its previous step; both are updated in place.
+    """
+    if state[HAS_PREVIOUS] > 0.0:
+        if taken @ previous < 0.0:
+            state[STEP_SIZE] = max(SHRINK * state[STEP_SIZE], state[MIN_STEP_SIZE])
+        else:
+            state[STEP_SIZE] = min(GROW * state[STEP_SIZE], state[MAX_STEP_SIZE])
+    previous[:] = taken
+    state[HAS_PREVIOUS] = 1.0
+    return state[STEP_SIZE]
 
 
 class StepAdaptation:
@@ -38,22 +50,25 @@ class StepAdaptation:
 
     def __init__(self) -> None:
         # Keyed by id(task), with the task kept alive so that its id cannot be reused meanwhile.
-        self._steps: dict[int, tuple[GradientTask, _TaskStep]] = {}
+        self._steps: dict[int, tuple[GradientTask, np.ndarray, np.ndarray]] = {}
 
     def reset(self) -> None:
         """Forget every task's adaptation: the next step of each starts at its max_step_size."""
         self._steps.clear()
 
-    def _entry(self, task: GradientTask) -> _TaskStep:
+    def state(self, task: GradientTask, nv: int) -> tuple[np.ndarray, np.ndarray]:
+        """The task's state row (4,) and previous direction (nv,) that `adapt_step_size` updates."""
         entry = self._steps.get(id(task))
-        if entry is None:
-            entry = (task, _TaskStep(task.max_step_size))
+        if entry is None or entry[2].size != nv:
+            state = np.array([task.max_step_size, task.min_step_size, task.max_step_size, 0.0])
+            entry = (task, state, np.zeros(nv))
             self._steps[id(task)] = entry
-        return entry[1]
+        return entry[1], entry[2]
 
     def step_size(self, task: GradientTask) -> float:
         """The task's current step norm [rad, or the units of v]: max_step_size before its first step."""
-        return self._entry(task).step_size
+        entry = self._steps.get(id(task))
+        return task.max_step_size if entry is None else float(entry[1][STEP_SIZE])
 
     def adapt(self, task: GradientTask, taken: np.ndarray) -> float:
         """The step norm along `taken` for this iteration, adapted to the previous iteration's.
@@ -72,11 +87,6 @@ class StepAdaptation:
         iteration to the next. Rprop on the raw gradient never sees the flips and keeps taking
         full steps back and forth; here they halve the step, so noise cannot walk the limb away.
         """
-        step = self._entry(task)
-        if step.previous_direction is not None:
-            if taken @ step.previous_direction < 0.0:
-                step.step_size = max(SHRINK * step.step_size, task.min_step_size)
-            else:
-                step.step_size = min(GROW * step.step_size, task.max_step_size)
-        step.previous_direction = taken
-        return step.step_size
+        taken = np.ascontiguousarray(taken, dtype=np.float64)
+        state, previous = self.state(task, taken.size)
+        return float(adapt_step_size(state, previous, taken))
