@@ -11,7 +11,7 @@ from ibik_pin.tasks.silhouette_axis import (
     SilhouetteAxisTask,
 )
 from ibik_pin.tasks.weighted_sum import WeightedSum
-from ibik_pin.vision.kernels import axis_value_and_pixel_gradient, candidate_axis_values
+from ibik_pin.vision.kernels import axis_value_and_frame_gradient, axis_value_and_pixel_gradient, candidate_axis_values
 from ibik_pin.vision.medial_axis import medial_axis_pixels
 from ibik_pin.vision.pinhole import look_at_camera
 from ibik_pin.vision.render import render_capsules
@@ -187,6 +187,30 @@ def test_the_compiled_axis_term_and_the_vectorised_distances_equal_the_plain_one
         values = np.empty(7)
         candidate_axis_values(samples, starts, ends, np.full(len(samples), np.inf), 15.0, values)
         np.testing.assert_allclose(values, _robust_values(plain, 15.0), rtol=1e-12)
+
+
+def test_the_axis_terms_world_gradient_is_its_pixel_gradient_through_the_projection(human, rng):
+    """dh/dX of the ends = dh/d pixels . d pixels/dX; an end behind the camera leaves the view out."""
+    task = SilhouetteAxisTask(human)
+    frames = len(task.frame_ids)
+    samples = rng.uniform(0.0, 320.0, (60, 2))
+    end_pixels = rng.uniform(0.0, 320.0, (frames, 2))
+    jacobians = rng.normal(size=(frames, 2, 3))
+    pixel_gradient = np.zeros_like(end_pixels)
+    expected_value = axis_value_and_pixel_gradient(samples, end_pixels, task._start_index, task._end_index, 15.0,
+                                                   pixel_gradient)
+    frame_gradient = np.ones((frames, 3))  # added to
+    value, in_front = axis_value_and_frame_gradient(samples, end_pixels, jacobians, np.full(frames, 2.0),
+                                                    task._start_index, task._end_index, 15.0, frame_gradient)
+    assert in_front and value == expected_value
+    np.testing.assert_allclose(frame_gradient - 1.0, np.einsum("ki,kij->kj", pixel_gradient, jacobians),
+                               rtol=0, atol=1e-15)
+    depth = np.full(frames, 2.0)
+    depth[3] = 0.0
+    untouched = np.ones((frames, 3))
+    assert axis_value_and_frame_gradient(samples, end_pixels, jacobians, depth, task._start_index,
+                                         task._end_index, 15.0, untouched) == (0.0, False)
+    assert (untouched == 1.0).all()
 
 
 def _robust_values(squared_distances, scale):

@@ -36,7 +36,7 @@ from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.tasks.segments import SegmentCriterion, segment_ends
 from ibik_pin.vision.camera import CameraLike, Projection
-from ibik_pin.vision.kernels import MIN_DEPTH, axis_value_and_pixel_gradient, candidate_axis_values
+from ibik_pin.vision.kernels import MIN_DEPTH, axis_value_and_frame_gradient, candidate_axis_values
 from ibik_pin.vision.pinhole import projector
 
 __all__ = ["AxisView", "SilhouetteAxisTask"]
@@ -107,15 +107,12 @@ class SilhouetteAxisTask(SegmentCriterion):
         value = 0.0
         gradient_frames = np.zeros_like(positions)  # dh/dX of each end frame, (K, 3)
         views = 0
-        for view, (pixels, projection_jacobian, depth) in zip(self._active_views, self._project(positions),
-                                                              strict=True):
-            if not (depth > MIN_DEPTH).all():
-                continue  # a segment end behind the camera: its projection means nothing
-            views += 1
-            pixel_gradient = np.zeros_like(pixels)
-            value += axis_value_and_pixel_gradient(view.pixels, pixels, self._start_index, self._end_index,
-                                                   view.robust_scale_px, pixel_gradient)
-            gradient_frames += np.einsum("ki,kij->kj", pixel_gradient, projection_jacobian)
+        for view, projection in zip(self._active_views, self._project(positions), strict=True):
+            # A view with a segment end behind the camera is skipped: its projection means nothing.
+            view_value, in_front = axis_value_and_frame_gradient(
+                view.pixels, *projection, self._start_index, self._end_index, view.robust_scale_px, gradient_frames)
+            value += view_value
+            views += in_front
         if views == 0:
             self._cache = (0.0, np.zeros(configuration.model.nv))
         else:

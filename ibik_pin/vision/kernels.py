@@ -13,7 +13,8 @@ in one call per view.
   (:meth:`ibik_pin.vision.support.SupportImage.sample`), or at projected points, their sum and each
   point's d support / d X_world, or the values alone.
 - :func:`axis_value_and_pixel_gradient`: the silhouette-axis term of one view and its derivative
-  with respect to the projected segment ends; :func:`candidate_axis_values`: its values at the
+  with respect to the projected segment ends (:func:`axis_value_and_frame_gradient`: with respect
+  to the ends in the world); :func:`candidate_axis_values`: its values at the
   swivel search's candidates (:mod:`ibik_pin.tasks.silhouette_axis`).
 
 They are compiled on first use and cached on disk (Numba's ``cache=True``), so only the first run
@@ -25,8 +26,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["MIN_DEPTH", "axis_value_and_pixel_gradient", "candidate_axis_values", "pinhole_parameters",
-           "pinhole_project", "support_overlap", "support_sample", "support_values"]
+__all__ = ["MIN_DEPTH", "axis_value_and_frame_gradient", "axis_value_and_pixel_gradient", "candidate_axis_values",
+           "pinhole_parameters", "pinhole_project", "support_overlap", "support_sample", "support_values"]
 
 # A point nearer the camera plane than this [m] is behind it: it reads 0 and pulls nowhere.
 MIN_DEPTH = 1e-6
@@ -260,13 +261,11 @@ def axis_value_and_pixel_gradient(samples, end_pixels, start_index, end_index, s
         along_u[segment] = end_pixels[b, 0] - end_pixels[a, 0]
         along_v[segment] = end_pixels[b, 1] - end_pixels[a, 1]
         inverse_length_squared[segment] = 1.0 / max(along_u[segment] ** 2 + along_v[segment] ** 2, 1e-12)
+    # Every segment's distance first, in a loop without branches that the compiler vectorises,
+    # then the nearest: a third faster than one loop keeping the best as it goes.
+    distances = np.empty(segments)
     for i in range(count):
         su, sv = samples[i, 0], samples[i, 1]
-        best = np.inf
-        best_segment = 0
-        best_s = 0.0
-        best_u = 0.0
-        best_v = 0.0
         for segment in range(segments):
             offset_u = su - start_u[segment]
             offset_v = sv - start_v[segment]
@@ -274,9 +273,19 @@ def axis_value_and_pixel_gradient(samples, end_pixels, start_index, end_index, s
             s = min(max(s, 0.0), 1.0)
             offset_u -= s * along_u[segment]  # the residual: sample minus closest point
             offset_v -= s * along_v[segment]
-            distance_squared = offset_u * offset_u + offset_v * offset_v
-            if distance_squared < best:
-                best, best_segment, best_s, best_u, best_v = distance_squared, segment, s, offset_u, offset_v
+            distances[segment] = offset_u * offset_u + offset_v * offset_v
+        best, best_segment = np.inf, 0
+        for segment in range(segments):
+            if distances[segment] < best:
+                best, best_segment = distances[segment], segment
+        # The nearest segment's closest point again, by the same arithmetic.
+        offset_u = su - start_u[best_segment]
+        offset_v = sv - start_v[best_segment]
+        best_s = (offset_u * along_u[best_segment] + offset_v * along_v[best_segment]) * \
+            inverse_length_squared[best_segment]
+        best_s = min(max(best_s, 0.0), 1.0)
+        best_u = offset_u - best_s * along_u[best_segment]
+        best_v = offset_v - best_s * along_v[best_segment]
         weight = np.exp(-best * inverse_scale_squared)
         total += 1.0 - weight
         pull = weight / (scale * count)
@@ -286,3 +295,30 @@ def axis_value_and_pixel_gradient(samples, end_pixels, start_index, end_index, s
         pixel_gradient[b, 0] += best_s * pull * best_u
         pixel_gradient[b, 1] += best_s * pull * best_v
     return -0.5 * scale * total / count
+
+
+@njit(cache=True, nogil=True)
+def axis_value_and_frame_gradient(samples, end_pixels, jacobians, depth, start_index, end_index, scale,
+                                  frame_gradient):
+    """h_axis of one view and its derivative with respect to the segment ends in the world.
+
+    Args:
+        samples, start_index, end_index, scale: as :func:`axis_value_and_pixel_gradient`.
+        end_pixels, jacobians, depth: the ends' projection: pixels (K, 2) [px], d pixels / d X_world
+            (K, 2, 3) [px/m], depth (K,) [m].
+        frame_gradient: (K, 3) to which dh/d X_world of each end is added.
+
+    Returns:
+        (h_axis [px], in front): with an end behind the camera (depth <= MIN_DEPTH) the view means
+        nothing: (0, False), frame_gradient untouched.
+    """
+    for k in range(depth.shape[0]):
+        if not depth[k] > MIN_DEPTH:
+            return 0.0, False
+    pixel_gradient = np.zeros((end_pixels.shape[0], 2))
+    value = axis_value_and_pixel_gradient(samples, end_pixels, start_index, end_index, scale, pixel_gradient)
+    for k in range(end_pixels.shape[0]):
+        for axis in range(3):
+            frame_gradient[k, axis] += (pixel_gradient[k, 0] * jacobians[k, 0, axis]
+                                        + pixel_gradient[k, 1] * jacobians[k, 1, axis])
+    return value, True
