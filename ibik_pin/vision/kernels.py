@@ -202,13 +202,22 @@ def candidate_axis_values(samples, starts, ends, fixed, scale, values):
     candidates, segments = starts.shape[0], starts.shape[1]
     inverse_scale_squared = 1.0 / (scale * scale)
     low_u, low_v, high_u, high_v = np.inf, np.inf, -np.inf, -np.inf
+    # Each segment's start, direction and 1 / length^2, contiguous over the candidates: the loop
+    # over them, innermost, is vectorised (twice as fast as over the segments, which are one or two).
+    start_u, start_v = np.empty((segments, candidates)), np.empty((segments, candidates))
+    along_u, along_v = np.empty((segments, candidates)), np.empty((segments, candidates))
+    inverse_length_squared = np.empty((segments, candidates))
     for c in range(candidates):
         values[c] = 0.0
         for k in range(segments):
             for u, v in ((starts[c, k, 0], starts[c, k, 1]), (ends[c, k, 0], ends[c, k, 1])):
                 low_u, high_u = min(low_u, u), max(high_u, u)
                 low_v, high_v = min(low_v, v), max(high_v, v)
+            start_u[k, c], start_v[k, c] = starts[c, k, 0], starts[c, k, 1]
+            along_u[k, c], along_v[k, c] = ends[c, k, 0] - starts[c, k, 0], ends[c, k, 1] - starts[c, k, 1]
+            inverse_length_squared[k, c] = 1.0 / max(along_u[k, c] ** 2 + along_v[k, c] ** 2, 1e-12)
     shared = 0.0  # the samples read once, for every candidate
+    best = np.empty(candidates)
     for i in range(samples.shape[0]):
         su, sv = samples[i, 0], samples[i, 1]
         beyond_u = max(low_u - su, su - high_u, 0.0)
@@ -217,18 +226,17 @@ def candidate_axis_values(samples, starts, ends, fixed, scale, values):
         if fixed[i] < (beyond_u * beyond_u + beyond_v * beyond_v) * (1.0 - 1e-9) - 1e-6:
             shared += 1.0 - np.exp(-fixed[i] * inverse_scale_squared)
             continue
-        for c in range(candidates):
-            best = fixed[i]
-            for k in range(segments):
-                start_u, start_v = starts[c, k, 0], starts[c, k, 1]
-                along_u, along_v = ends[c, k, 0] - start_u, ends[c, k, 1] - start_v
-                offset_u, offset_v = su - start_u, sv - start_v
-                s = (offset_u * along_u + offset_v * along_v) / max(along_u * along_u + along_v * along_v, 1e-12)
+        best[:] = fixed[i]
+        for k in range(segments):
+            for c in range(candidates):
+                offset_u, offset_v = su - start_u[k, c], sv - start_v[k, c]
+                s = (offset_u * along_u[k, c] + offset_v * along_v[k, c]) * inverse_length_squared[k, c]
                 s = min(max(s, 0.0), 1.0)
-                offset_u -= s * along_u
-                offset_v -= s * along_v
-                best = min(best, offset_u * offset_u + offset_v * offset_v)
-            values[c] += 1.0 - np.exp(-best * inverse_scale_squared)
+                offset_u -= s * along_u[k, c]
+                offset_v -= s * along_v[k, c]
+                best[c] = min(best[c], offset_u * offset_u + offset_v * offset_v)
+        for c in range(candidates):
+            values[c] += 1.0 - np.exp(-best[c] * inverse_scale_squared)
     for c in range(candidates):
         values[c] = -0.5 * scale * (values[c] + shared) / max(samples.shape[0], 1)
 
