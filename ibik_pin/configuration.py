@@ -63,6 +63,9 @@ class Configuration:
         self._positions = np.zeros((model.nframes, 3))
         self._jacobians = np.zeros((model.nframes, 3, model.nv))
         self._read_version = -1
+        self._all_positions, self._all_jacobians = self._positions.view(), self._jacobians.view()
+        self._all_positions.setflags(write=False)
+        self._all_jacobians.setflags(write=False)
         # The arrays handed out since the last update, by the frame ids' bytes (int64).
         self._position_sets: dict[bytes, np.ndarray] = {}
         self._jacobian_sets: dict[bytes, np.ndarray] = {}
@@ -120,6 +123,13 @@ class Configuration:
             rows = kept[key] = values[frame_ids]
             rows.setflags(write=False)
         return rows
+
+    def frame_arrays(self, frame_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every frame's position (nframes, 3) [m] and translation Jacobian (nframes, 3, nv), current
+        on the rows of frame_ids (other rows may be stale), read-only: for compiled readers that
+        pick their rows themselves, without a copy of them."""
+        self._read(np.asarray(frame_ids).reshape(-1))
+        return self._all_positions, self._all_jacobians
 
     def frame_positions(self, frame_ids: np.ndarray) -> np.ndarray:
         """World positions [m] of several frame origins, shape (K, 3), read-only."""

@@ -8,11 +8,26 @@ from typing import cast
 
 import numpy as np
 import pinocchio as pin
+from numba import njit
 
 from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError
 from ibik_pin.model import frame_id
 from ibik_pin.tasks.base import Task
+
+
+@njit(cache=True, nogil=True)
+def _position_rows(positions, jacobians, frame_ids, column_scales, targets, error_scales, A, b):
+    """Writes the rows (3K, nv) and right-hand sides (3K,) of K position tasks: task k's rows are
+    its frame's translation Jacobian times its column scales, its right-hand side its error times
+    -sqrt(weight) gain (its error_scales[k])."""
+    for k in range(frame_ids.shape[0]):
+        frame = frame_ids[k]
+        for axis in range(3):
+            row = 3 * k + axis
+            b[row] = error_scales[k] * (positions[frame, axis] - targets[k, axis])
+            for v in range(A.shape[1]):
+                A[row, v] = jacobians[frame, axis, v] * column_scales[k, v]
 
 
 class FramePositionTask(Task):
@@ -84,11 +99,12 @@ class FramePositionTask(Task):
             return super().stacked_linear_system(tasks, configuration)
         chosen = cast(Sequence[FramePositionTask], tasks)
         frame_ids = np.array([task.frame_id for task in chosen])
-        A = configuration.frame_translation_jacobians(frame_ids) * np.array(
-            [task.column_scales() for task in chosen])[:, None, :]  # (K, 3, nv)
-        errors = configuration.frame_positions(frame_ids) - np.array([task.target for task in chosen])
-        b = np.array([-math.sqrt(task.weight) * task.gain for task in chosen])[:, None] * errors
-        return A.reshape(-1, configuration.nv), b.reshape(-1)
+        positions, jacobians = configuration.frame_arrays(frame_ids)
+        A, b = np.empty((3 * len(chosen), configuration.nv)), np.empty(3 * len(chosen))
+        _position_rows(positions, jacobians, frame_ids, np.array([task.column_scales() for task in chosen]),
+                       np.array([task.target for task in chosen]),
+                       np.array([-math.sqrt(task.weight) * task.gain for task in chosen]), A, b)
+        return A, b
 
     def column_scales(self) -> np.ndarray:
         """What each Jacobian column of the task's rows is multiplied by, shape (nv,):
