@@ -8,6 +8,7 @@ import numpy as np
 import pinocchio as pin
 from numba import njit
 
+from ibik_pin.checks import all_finite
 from ibik_pin.exceptions import InputError
 
 _WORLD_ALIGNED = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
@@ -77,7 +78,7 @@ class Configuration:
         q = np.array(q, dtype=float).reshape(-1)
         if q.shape != (self.model.nq,):
             raise InputError(f"configuration q must have shape ({self.model.nq},), got {q.shape}")
-        if not np.all(np.isfinite(q)):
+        if not all_finite(q):
             raise InputError("configuration q must be finite, got NaN or infinity")
         return q
 

@@ -108,3 +108,18 @@ def test_a_nan_pixel_reads_nothing_and_pulls_nowhere():
     total, complete = support_overlap(pixels, jacobians, np.ones(3), values, row, column, 640, 480, gradient)
     assert complete and total == pytest.approx(float(support.sample(pixels[:1]).values[0]), rel=1e-12)
     assert np.isfinite(gradient).all() and not gradient[1:].any()
+
+
+def test_the_compiled_finiteness_check_is_numpys(rng):
+    """On the arrays the solver checks at every step: rows (2D, C and Fortran order, a slice), q."""
+    from ibik_pin.checks import all_finite
+
+    rows = rng.normal(size=(21, 44))
+    cases = [rows, np.asfortranarray(rows), rows[:, ::3], rng.normal(size=51), np.zeros((0, 44))]
+    for bad in (np.nan, np.inf, -np.inf):
+        for case in (rows.copy(), rng.normal(size=51)):
+            case.flat[7] = bad
+            cases.append(case)
+    answers = [all_finite(case) for case in cases]
+    assert answers == [bool(np.isfinite(case).all()) for case in cases]
+    assert answers.count(True) == 5

@@ -21,6 +21,7 @@ from typing import cast
 
 import numpy as np
 
+from ibik_pin.checks import all_finite
 from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError, SolverError
 from ibik_pin.limits import JointLimits
@@ -155,7 +156,7 @@ def build_levels(configuration: Configuration, levels: Levels) -> list:
                           LeastSquaresLevel(np.vstack([A for A, _ in blocks]), np.concatenate([b for _, b in blocks])))
             # NaN rows would turn the whole step, then q, into NaN without a word. One check of the
             # level's rows (tasks are many, each check a few numpy calls), then the culprit named.
-            if not (np.isfinite(level_rows.A).all() and np.isfinite(level_rows.b).all()):
+            if not (all_finite(level_rows.A) and all_finite(level_rows.b)):
                 culprit = next(task for task in least_squares if not all(
                     np.isfinite(rows).all() for rows in task.compute_linear_system(configuration)))
                 raise SolverError(

@@ -71,6 +71,8 @@ class Task(ABC):
         """The rows (A, b) of several tasks of this class, stacked in order: each task's
         compute_linear_system, in one (m, nv) and one (m,). A class whose tasks' rows come faster
         together (FramePositionTask: one read of every frame's Jacobian) overrides this."""
+        if len(tasks) == 1:  # no copy into a stack of one
+            return tasks[0].compute_linear_system(configuration)
         rows = [task.compute_linear_system(configuration) for task in tasks]
         return np.vstack([A for A, _ in rows]), np.concatenate([b for _, b in rows])
 
