@@ -88,6 +88,23 @@ def test_pinhole_jacobian_matches_central_finite_differences_with_full_distortio
     np.testing.assert_allclose(depth, camera.points_camera(points)[:, 2], rtol=0.0, atol=1e-12)
 
 
+def test_a_projector_gives_each_cameras_projection_to_the_bit():
+    """Pinhole cameras projected in one compiled call, a mixed list camera by camera."""
+    from ibik_pin.vision.pinhole import projector
+
+    rng = np.random.default_rng(3)
+    pinholes = [look_at_camera(f"c{k}", (640, 480), 600.0 + 50 * k, rng.normal(0.0, 1.0, 3) + [0.0, 0.0, 5.0],
+                               np.zeros(3), np.array([0.0, 1.0, 0.0])) for k in range(3)] + [distorted_camera()]
+    orthographic = OrthographicCamera("o", (640, 480), np.eye(3), np.zeros(3), 100.0, np.array([320.0, 240.0]))
+    points = rng.normal(0.0, 0.5, (25, 3))
+    for cameras in (pinholes, [pinholes[0], orthographic], []):
+        projections = projector(cameras)(points)
+        assert len(projections) == len(cameras)
+        for camera, projection in zip(cameras, projections, strict=True):
+            for mine, reference in zip(projection, camera.project_with_jacobian(points), strict=True):
+                np.testing.assert_array_equal(mine, reference)
+
+
 def test_pinhole_depth_is_the_z_coordinate_in_the_camera_frame():
     camera = look_at_camera("c", (320, 240), 300.0, eye=[0.0, 0.0, 5.0], target=[0.0, 0.0, 0.0], up=[0.0, 1.0, 0.0])
     _, _, depth = camera.project_with_jacobian(np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 7.0]]))

@@ -5,7 +5,7 @@ import pytest
 
 from ibik_pin.tasks.image import View, support_at
 from ibik_pin.vision.camera import OrthographicCamera
-from ibik_pin.vision.kernels import support_overlap
+from ibik_pin.vision.kernels import support_overlap_at_segments
 from ibik_pin.vision.pinhole import PinholeCamera
 from ibik_pin.vision.support import SupportImage, support_from_mask
 
@@ -35,10 +35,14 @@ def plain_reading(projection, support: SupportImage) -> tuple[np.ndarray, np.nda
 
 
 def compiled_overlap(projection, support: SupportImage, whole_frame: bool = False):
-    """support_overlap's sum, gradient and completeness on the support's held values."""
-    gradient = np.zeros((len(projection.depth), 3))
+    """The compiled overlap's sum, gradient and completeness on the support's held values, each
+    point a segment of its own (both ends the point, s = 0)."""
+    count = len(projection.depth)
+    gradient = np.zeros((count, 3))
     values, row, column = support.held_values(whole_frame)
-    total, complete = support_overlap(*projection, values, row, column, *support.size, gradient)
+    own = np.arange(count)
+    total, complete = support_overlap_at_segments(*projection, values, row, column, *support.size, own, own,
+                                                  np.zeros(count), gradient)
     return total, gradient, complete
 
 
@@ -82,7 +86,8 @@ def test_the_compiled_overlap_on_the_window_is_complete_only_when_every_point_re
     assert complete and total == pytest.approx(values.sum(), rel=1e-12)
     np.testing.assert_allclose(gradient, expected_gradient, rtol=1e-10, atol=1e-12)
     far = np.vstack([points, camera.center_world + 3.0 * camera.rotation[2] + 2.0 * camera.rotation[0]])
-    assert not compiled_overlap(camera.project_with_jacobian(far), silhouette_support())[2]
+    _, untouched, complete = compiled_overlap(camera.project_with_jacobian(far), silhouette_support())
+    assert not complete and not untouched.any()  # an incomplete read adds nothing
     # support_at then reads the whole frame.
     windowed = silhouette_support()
     expected, _ = plain_reading(camera.project_with_jacobian(far), SupportImage(windowed.values))
@@ -99,13 +104,36 @@ def test_the_compiled_overlap_of_an_orthographic_camera_equals_the_plain_reading
     np.testing.assert_allclose(gradient, expected_gradient, rtol=1e-10, atol=1e-12)
 
 
+def test_a_samples_pull_goes_to_its_segments_ends_in_proportion(rng):
+    """Samples p = (1 - s) X_a + s X_b: the ends' gradient is the interpolation's transpose applied
+    to the samples' own gradients."""
+    support = SupportImage(silhouette_support().values)
+    camera = distorted_camera(rng)
+    points = points_around(camera, rng, 80)
+    projection = camera.project_with_jacobian(points)
+    _, point_gradient, _ = compiled_overlap(projection, support)
+    frames = 9
+    start, end = rng.integers(0, frames, 80), rng.integers(0, frames, 80)
+    fraction = rng.uniform(0.0, 1.0, 80)
+    interpolation = np.zeros((80, frames))
+    np.add.at(interpolation, (np.arange(80), start), 1.0 - fraction)
+    np.add.at(interpolation, (np.arange(80), end), fraction)
+    values, row, column = support.held_values()
+    frame_gradient = np.zeros((frames, 3))
+    total, complete = support_overlap_at_segments(*projection, values, row, column, *support.size, start, end,
+                                                  fraction, frame_gradient)
+    assert complete and total == pytest.approx(plain_reading(projection, support)[0].sum(), rel=1e-12)
+    np.testing.assert_allclose(frame_gradient, interpolation.T @ point_gradient, rtol=1e-10, atol=1e-12)
+
+
 def test_a_nan_pixel_reads_nothing_and_pulls_nowhere():
     support = SupportImage(silhouette_support().values)
     pixels = np.array([[320.0, 240.0], [np.nan, 240.0], [300.0, np.nan]])
     jacobians = np.ones((3, 2, 3))
     gradient = np.zeros((3, 3))
     values, row, column = support.held_values()
-    total, complete = support_overlap(pixels, jacobians, np.ones(3), values, row, column, 640, 480, gradient)
+    total, complete = support_overlap_at_segments(pixels, jacobians, np.ones(3), values, row, column, 640, 480,
+                                                  np.arange(3), np.arange(3), np.zeros(3), gradient)
     assert complete and total == pytest.approx(float(support.sample(pixels[:1]).values[0]), rel=1e-12)
     assert np.isfinite(gradient).all() and not gradient[1:].any()
 

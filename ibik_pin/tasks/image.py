@@ -25,8 +25,9 @@ from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.tasks.segments import SegmentCriterion, segment_ends
-from ibik_pin.vision.camera import CameraLike
-from ibik_pin.vision.kernels import support_overlap, support_values
+from ibik_pin.vision.camera import CameraLike, Projection
+from ibik_pin.vision.kernels import support_overlap_at_segments, support_values
+from ibik_pin.vision.pinhole import projector
 from ibik_pin.vision.support import SupportImageLike
 
 
@@ -91,6 +92,9 @@ class ImageTask(SegmentCriterion):
         np.add.at(weights, (rows, np.repeat(starts, n)), np.tile(1.0 - s, len(segments)))
         np.add.at(weights, (rows, np.repeat(ends, n)), np.tile(s, len(segments)))
         self._interpolation = weights
+        # The same, per sample: its segment's two end rows and its s.
+        self._sample_start, self._sample_end = np.repeat(starts, n), np.repeat(ends, n)
+        self._sample_fraction = np.tile(s, len(segments))
         self.segments = segments
         self.views: list[View] = []
         self.set_views(views)
@@ -109,6 +113,7 @@ class ImageTask(SegmentCriterion):
                     stacklevel=2,
                 )
         self._active_views = [v for v in self.views if v.support.enabled]
+        self._project = projector([view.camera for view in self._active_views])
         self.enabled = bool(self._active_views)
         self._cache_version = -1
 
@@ -121,14 +126,13 @@ class ImageTask(SegmentCriterion):
             return self._cache
         points = self.sample_points(configuration)
         value = 0.0
-        gradient_points = np.zeros_like(points)  # dh/dX for every sample, (M, 3)
-        for view in self._active_views:
-            value += _read_view(view, points, gradient_points)
+        gradient_frames = np.zeros((len(self._frame_ids), 3))  # dh/dX of each end frame, (K, 3)
+        for view, projection in zip(self._active_views, self._project(points), strict=True):
+            value += _read_view(view, projection, self._sample_start, self._sample_end, self._sample_fraction,
+                                gradient_frames)
         count = max(len(self._active_views), 1) * len(points)
-        gradient_points /= count
-        gradient_frames = self._interpolation.T @ gradient_points  # (K, 3)
         jacobians = configuration.frame_translation_jacobians(self._frame_ids)  # (K, 3, nv)
-        gradient = gradient_frames.reshape(-1) @ jacobians.reshape(-1, jacobians.shape[2])
+        gradient = (gradient_frames / count).reshape(-1) @ jacobians.reshape(-1, jacobians.shape[2])
         self._cache = (value / count, gradient)
         self._cache_version = configuration.version
         return self._cache
@@ -183,18 +187,17 @@ class ImageTask(SegmentCriterion):
         return self._evaluate(configuration)[1]
 
 
-def _read_view(view: View, points: np.ndarray, point_gradient: np.ndarray) -> float:
-    """The sum of a view's support at the projections of points (M, 3) [m] (0 behind the camera);
-    adds each point's d support / d X_world to point_gradient (M, 3), in one compiled loop."""
-    pixels, jacobian, depth = view.camera.project_with_jacobian(points)
+def _read_view(view: View, projection: Projection, sample_start: np.ndarray, sample_end: np.ndarray,
+               sample_fraction: np.ndarray, frame_gradient: np.ndarray) -> float:
+    """The sum of a view's support at the projected segment samples (0 behind the camera); adds
+    each segment end's d support / d X_world to frame_gradient (K, 3), in one compiled loop."""
     width, height = view.support.size
-    for whole_frame in (False, True):  # the window around the body, unless a point falls outside
+    for whole_frame in (False, True):  # the window around the body, unless a sample falls outside
         values, row, column = view.support.held_values(whole_frame)
-        view_gradient = np.zeros_like(point_gradient)
-        total, complete = support_overlap(pixels, jacobian, depth, values, row, column, width, height, view_gradient)
+        total, complete = support_overlap_at_segments(*projection, values, row, column, width, height, sample_start,
+                                                      sample_end, sample_fraction, frame_gradient)
         if complete:
             break
-    point_gradient += view_gradient
     return total
 
 

@@ -7,11 +7,12 @@ the overhead of the calls, not the arithmetic, made the image criterion half of 
 in one call per view.
 
 - :func:`pinhole_project`: points through an OpenCV pinhole camera, distortion included, with the
-  projection's analytic Jacobian (:class:`ibik_pin.vision.pinhole.PinholeCamera` projects with it).
-- :func:`support_sample`, :func:`support_overlap`, :func:`support_values`: read a support image by
-  bilinear interpolation with the interpolant's exact derivative: at pixels
-  (:meth:`ibik_pin.vision.support.SupportImage.sample`), or at projected points, their sum and each
-  point's d support / d X_world, or the values alone.
+  projection's analytic Jacobian (:class:`ibik_pin.vision.pinhole.PinholeCamera` projects with it;
+  :func:`pinhole_project_views`: through several cameras in one call).
+- :func:`support_sample`, :func:`support_overlap_at_segments`, :func:`support_values`: read a
+  support image by bilinear interpolation with the interpolant's exact derivative: at pixels
+  (:meth:`ibik_pin.vision.support.SupportImage.sample`); at projected samples along segments, their
+  sum and each segment end's d support / d X_world; or the values alone at projected points.
 - :func:`axis_value_and_pixel_gradient`: the silhouette-axis term of one view and its derivative
   with respect to the projected segment ends (:func:`axis_value_and_frame_gradient`: with respect
   to the ends in the world); :func:`candidate_axis_values`: its values at the
@@ -27,7 +28,8 @@ import numpy as np
 from numba import njit
 
 __all__ = ["MIN_DEPTH", "axis_value_and_frame_gradient", "axis_value_and_pixel_gradient", "candidate_axis_values",
-           "pinhole_parameters", "pinhole_project", "support_overlap", "support_sample", "support_values"]
+           "pinhole_parameters", "pinhole_project", "pinhole_project_views", "support_overlap_at_segments",
+           "support_sample", "support_values"]
 
 # A point nearer the camera plane than this [m] is behind it: it reads 0 and pulls nowhere.
 MIN_DEPTH = 1e-6
@@ -122,9 +124,17 @@ def pinhole_project(points, camera, pixels, jacobian, depth):
 
 
 @njit(cache=True, nogil=True)
+def pinhole_project_views(points, cameras, pixels, jacobian, depth):
+    """:func:`pinhole_project` through V cameras (V, 21) at once: writes pixels (V, N, 2),
+    jacobian (V, N, 2, 3) and depth (V, N)."""
+    for view in range(cameras.shape[0]):
+        pinhole_project(points, cameras[view], pixels[view], jacobian[view], depth[view])
+
+
+@njit(cache=True, nogil=True)
 def support_sample(pixels, support, row0, column0, width, height, values, gradient):
     """The support and its derivative at pixels (M, 2) [px]: writes values (M,) [support units]
-    and gradient (M, 2) d values / d (u, v); `support` as in :func:`support_overlap`.
+    and gradient (M, 2) d values / d (u, v); `support` as in :func:`support_overlap_at_segments`.
 
     Returns complete (False: a pixel read outside `support`, the outputs partly written).
     """
@@ -137,21 +147,27 @@ def support_sample(pixels, support, row0, column0, width, height, values, gradie
 
 
 @njit(cache=True, nogil=True)
-def support_overlap(pixels, jacobians, depth, support, row0, column0, width, height, point_gradient):
-    """Sum of the support at projected points, and each point's derivative.
+def support_overlap_at_segments(pixels, jacobians, depth, support, row0, column0, width, height, sample_start,
+                                sample_end, sample_fraction, frame_gradient):
+    """Sum of the support at projected samples p = (1 - s) X_a + s X_b of segments between frames,
+    each sample's derivative passed on to the frames: (1 - s) of it to X_a, s to X_b.
 
     Args:
-        pixels: (M, 2) projections [px]; jacobians: (M, 2, 3) their d pixels / d X_world [px/m];
-            depth: (M,) [m] (a point nearer than MIN_DEPTH is behind the camera: it reads 0).
+        pixels: (M, 2) the samples' projections [px]; jacobians: (M, 2, 3) their d pixels / d X_world
+            [px/m]; depth: (M,) [m] (a sample nearer than MIN_DEPTH is behind the camera: it reads 0).
         support: (h, w) float32 support values of the frame from (row0, column0) on.
         width, height: the frame's size [px].
-        point_gradient: (M, 3) to which each point's d support / d X_world [support units/m] is added.
+        sample_start, sample_end: (M,) each sample's rows a and b of frame_gradient;
+            sample_fraction: (M,) its s.
+        frame_gradient: (K, 3) to which each frame's d support / d X_world [support units/m] is
+            added, only when every sample read inside `support`.
 
     Returns:
-        (sum of the support over the points in front of the camera, complete): complete is False,
-        and point_gradient partly written, when a point reads outside `support`; the caller then
-        reads the whole frame instead.
+        (sum of the support over the samples in front of the camera, complete): complete is False,
+        and frame_gradient untouched, when a sample reads outside `support`; the caller then reads
+        the whole frame instead.
     """
+    gradient = np.zeros_like(frame_gradient)
     total = 0.0
     for m in range(pixels.shape[0]):
         if not depth[m] > MIN_DEPTH:
@@ -160,8 +176,12 @@ def support_overlap(pixels, jacobians, depth, support, row0, column0, width, hei
         if not inside:
             return total, False
         total += value
+        a, b, s = sample_start[m], sample_end[m], sample_fraction[m]
         for axis in range(3):
-            point_gradient[m, axis] += d_u * jacobians[m, 0, axis] + d_v * jacobians[m, 1, axis]
+            pull = d_u * jacobians[m, 0, axis] + d_v * jacobians[m, 1, axis]
+            gradient[a, axis] += (1.0 - s) * pull
+            gradient[b, axis] += s * pull
+    frame_gradient += gradient
     return total, True
 
 
@@ -170,7 +190,7 @@ def support_values(pixels, depth, support, row0, column0, width, height, behind,
     """The support at projected points, `behind` for those behind the camera: writes values (M,)
     [support units].
 
-    Same arguments as :func:`support_overlap`; returns complete (False: a point read outside
+    Same arguments as :func:`support_overlap_at_segments`; returns complete (False: a point read outside
     `support`, values partly written).
     """
     for m in range(pixels.shape[0]):
