@@ -411,25 +411,26 @@ def test_rows_that_each_hold_one_coordinate_take_the_qr_factorisations_step_and_
     """A posture task on some coordinates (the trunk hold) skips the factorisation: the same step
     and null space as the pivoted QR, a row too weak to count (below the rank tolerance) and a zero
     row included; any other matrix is left to the QR."""
-    from ibik_pin.solvers.nullspace import _coordinate_solve, _factor, damped_solve
+    from ibik_pin.solvers.kernels import coordinate_solve, factor
+    from ibik_pin.solvers.nullspace import damped_solve
 
     matrix = np.zeros((5, 12))
     for row, (column, scale) in enumerate([(3, 1.0), (0, 0.1), (7, 2.5), (9, 1e-12), (5, 0.0)]):
         matrix[row, column] = scale
     residual = rng.normal(size=5)
-    w, free, taken = _coordinate_solve(matrix, residual, DEFAULT_DAMPING)
+    w, free, taken = coordinate_solve(matrix, residual, DEFAULT_DAMPING)
     assert taken
     w_qr, remaining_qr = damped_solve(matrix, residual, DEFAULT_DAMPING)
     np.testing.assert_allclose(w, w_qr, rtol=0, atol=1e-15)
     np.testing.assert_array_equal(free, [1, 2, 4, 5, 6, 8, 9, 10, 11])
     np.testing.assert_allclose(np.eye(12)[:, free] @ np.eye(12)[free], remaining_qr @ remaining_qr.T, atol=1e-12)
-    assert _factor(matrix, DEFAULT_DAMPING)[0].shape[1] == 3  # the QR's rank: the weak row does not count
+    assert factor(matrix, DEFAULT_DAMPING)[0].shape[1] == 3  # the QR's rank: the weak row does not count
     shared = matrix.copy()
     shared[4, 3] = 1.0  # two rows on one coordinate
-    assert not _coordinate_solve(shared, residual, DEFAULT_DAMPING)[2]
+    assert not coordinate_solve(shared, residual, DEFAULT_DAMPING)[2]
     mixed = matrix.copy()
     mixed[0, 4] = 0.5  # a row on two coordinates
-    assert not _coordinate_solve(mixed, residual, DEFAULT_DAMPING)[2]
+    assert not coordinate_solve(mixed, residual, DEFAULT_DAMPING)[2]
 
 
 def test_a_proxsuite_failure_skips_its_level_and_is_reported_failed(human, monkeypatch):

@@ -7,42 +7,19 @@ and grows by 1.2 (up to `max_step_size`) while it holds.
 
 This state belongs to the solver that takes the steps, not to the task: a task only says what it
 measures and how far one step may go, so the same task object can run through several solvers,
-each adapting its own step. The rule itself (`adapt_step_size`) is compiled: the solvers' level
-loop (:mod:`ibik_pin.solvers.nullspace`) applies it inside its one compiled call.
+each adapting its own step. The rule itself (`adapt_step_size`, with Rprop's factors 0.5 and 1.2 of
+Riedmiller & Braun 1993) is compiled in :mod:`ibik_pin.solvers.kernels`: the level loop applies it
+inside its one compiled call.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from ibik_pin.solvers.kernels import STEP_SIZE, adapt_step_size
 from ibik_pin.tasks.base import GradientTask
 
 __all__ = ["StepAdaptation", "adapt_step_size"]
-
-# Rprop's factors (Riedmiller & Braun 1993 use 0.5 and 1.2).
-SHRINK = 0.5
-GROW = 1.2
-
-# The columns of a task's state row.
-STEP_SIZE, MIN_STEP_SIZE, MAX_STEP_SIZE, HAS_PREVIOUS = range(4)
-
-
-@njit(cache=True, nogil=True)
-def adapt_step_size(state, previous, taken):
-    """The step norm along `taken` (nv,) for this iteration, adapted to the previous iteration's.
-
-    `state` is a task's row [step size, min, max, has previous (0/1)] and `previous` (nv,) the
-    direction of its previous step; both are updated in place.
-    """
-    if state[HAS_PREVIOUS] > 0.0:
-        if taken @ previous < 0.0:
-            state[STEP_SIZE] = max(SHRINK * state[STEP_SIZE], state[MIN_STEP_SIZE])
-        else:
-            state[STEP_SIZE] = min(GROW * state[STEP_SIZE], state[MAX_STEP_SIZE])
-    previous[:] = taken
-    state[HAS_PREVIOUS] = 1.0
-    return state[STEP_SIZE]
 
 
 class StepAdaptation:
