@@ -11,7 +11,13 @@ from ibik_pin.tasks.silhouette_axis import (
     SilhouetteAxisTask,
 )
 from ibik_pin.tasks.weighted_sum import WeightedSum
-from ibik_pin.vision.kernels import axis_value_and_frame_gradient, axis_value_and_pixel_gradient, candidate_axis_values
+from ibik_pin.vision.kernels import (
+    axis_value_and_frame_gradient,
+    axis_value_and_pixel_gradient,
+    candidate_axis_values,
+    nearest_of_rows,
+    segment_squared_distances,
+)
 from ibik_pin.vision.medial_axis import medial_axis_pixels
 from ibik_pin.vision.pinhole import look_at_camera
 from ibik_pin.vision.render import render_capsules
@@ -211,6 +217,23 @@ def test_the_axis_terms_world_gradient_is_its_pixel_gradient_through_the_project
     assert axis_value_and_frame_gradient(samples, end_pixels, jacobians, depth, task._start_index,
                                          task._end_index, 15.0, untouched) == (0.0, False)
     assert (untouched == 1.0).all()
+
+
+def test_the_compiled_segment_distances_and_their_nearest_equal_the_plain_ones(rng):
+    samples = rng.uniform(0.0, 320.0, (50, 2))
+    starts, ends = rng.uniform(0.0, 320.0, (2, 6, 2))
+    ends[2] = starts[2]  # a segment of zero length
+    distances = np.empty((6, 50))
+    segment_squared_distances(samples, starts, ends, distances)
+    plain = np.array([[float(residual @ residual) for _, residual in
+                       (_plain_closest(sample, a, b) for sample in samples)]
+                      for a, b in zip(starts, ends, strict=True)])
+    np.testing.assert_allclose(distances, plain, rtol=1e-12, atol=1e-9)
+    nearest = np.empty(50)
+    nearest_of_rows(distances, np.array([1, 4, 5]), nearest)
+    np.testing.assert_array_equal(nearest, distances[[1, 4, 5]].min(axis=0))
+    nearest_of_rows(distances, np.zeros(0, dtype=np.int64), nearest)
+    assert np.isinf(nearest).all()  # no shared segment: nothing is near
 
 
 def _robust_values(squared_distances, scale):

@@ -114,6 +114,7 @@ class ImageTask(SegmentCriterion):
                 )
         self._active_views = [v for v in self.views if v.support.enabled]
         self._project = projector([view.camera for view in self._active_views])
+        self._changing: dict[bytes, np.ndarray] = {}
         self.enabled = bool(self._active_views)
         self._cache_version = -1
 
@@ -140,7 +141,7 @@ class ImageTask(SegmentCriterion):
     def at_pose(self, frame_positions: np.ndarray) -> list[np.ndarray]:
         """Per view, the support at every sample of the segments placed at `frame_positions` (K, 3)
         (0 behind the camera), shape (1, M)."""
-        return self._support_values(np.matmul(self._interpolation, frame_positions[None]))
+        return self._support_values(self._samples(self._interpolation, frame_positions[None]))
 
     def values_at(self, frame_positions: np.ndarray, moved: np.ndarray | None = None,
                   pose: object | None = None) -> np.ndarray:
@@ -150,34 +151,49 @@ class ImageTask(SegmentCriterion):
         (read in `pose` when given).
         """
         samples = self._interpolation.shape[0]
-        changing = np.ones(samples, dtype=bool)
-        known = cast(list | None, pose) if moved is not None else None
-        if moved is not None:
-            changing = np.any(self._interpolation[:, moved] != 0.0, axis=1)
-        candidates = frame_positions.shape[0]
-        values = np.zeros(candidates)
-        moving = self._support_values(np.matmul(self._interpolation[changing], frame_positions))
-        if not changing.all():
-            still = ([at_pose[:, ~changing] for at_pose in known] if known is not None else
-                     self._support_values(np.matmul(self._interpolation[~changing], frame_positions[:1])))
-        for index in range(len(self._active_views)):
-            values += moving[index].sum(axis=1)
-            if not changing.all():
-                values += still[index].sum(axis=1)
+        if moved is None:
+            values = sum(view_values.sum(axis=1) for view_values in
+                         self._support_values(self._samples(self._interpolation, frame_positions)))
+            return values / (samples * max(len(self._active_views), 1))
+        known = cast(list | None, pose)
+        changing = self._changing_samples(moved)
+        values = np.zeros(frame_positions.shape[0])
+        moving = self._support_values(self._samples(self._interpolation[changing], frame_positions))
+        still = ([at_pose[:, ~changing] for at_pose in known] if known is not None else
+                 self._support_values(self._samples(self._interpolation[~changing], frame_positions[:1])))
+        for moving_values, still_values in zip(moving, still, strict=True):
+            values += moving_values.sum(axis=1) + still_values.sum()
         return values / (samples * max(len(self._active_views), 1))
+
+    def _changing_samples(self, moved: np.ndarray) -> np.ndarray:
+        """(M,) bool: the samples on a segment that a `moved` row ends (kept per set of rows)."""
+        key = np.asarray(moved).tobytes()
+        changing = self._changing.get(key)
+        if changing is None:
+            changing = self._changing[key] = np.any(self._interpolation[:, moved] != 0.0, axis=1)
+        return changing
+
+    @staticmethod
+    def _samples(interpolation: np.ndarray, frame_positions: np.ndarray) -> np.ndarray:
+        """The samples (C, M, 3) [m] of (C, K, 3) placements of the ends: one product for all
+        placements (numpy's stacked matmul costs several times it)."""
+        candidates, frames = frame_positions.shape[:2]
+        flat = interpolation @ frame_positions.transpose(1, 0, 2).reshape(frames, 3 * candidates)
+        return flat.reshape(-1, candidates, 3).transpose(1, 0, 2)
 
     def _support_values(self, points: np.ndarray) -> list[np.ndarray]:
         """Per view, the support at (C, M, 3) points [m] (0 behind the camera), shape (C, M)."""
-        flat = points.reshape(-1, 3)
-        return [support_at(view, flat).reshape(points.shape[:2]) for view in self._active_views]
+        flat = np.ascontiguousarray(points).reshape(-1, 3)
+        return [support_at(view, flat, projection=projection).reshape(points.shape[:2])
+                for view, projection in zip(self._active_views, self._project(flat), strict=True)]
 
     def inside_silhouettes(self, points: np.ndarray, tolerance_px: float = 2.0) -> np.ndarray:
         """(N,) bool: each world point (N, 3) [m] projects inside the silhouette, or within
         `tolerance_px` of it, in every enabled view (the support is a signed distance, positive
         inside: the silhouette's border is 0; a point behind a camera is outside)."""
         inside = np.ones(len(points), dtype=bool)
-        for view in self._active_views:
-            inside &= support_at(view, points, behind=-np.inf) > -float(tolerance_px)
+        for view, projection in zip(self._active_views, self._project(points), strict=True):
+            inside &= support_at(view, points, behind=-np.inf, projection=projection) > -float(tolerance_px)
         return inside
 
     def compute_value(self, configuration: Configuration) -> float:
@@ -201,10 +217,12 @@ def _read_view(view: View, projection: Projection, sample_start: np.ndarray, sam
     return total
 
 
-def support_at(view: View, points: np.ndarray, behind: float = 0.0) -> np.ndarray:
+def support_at(view: View, points: np.ndarray, behind: float = 0.0, projection: Projection | None = None) -> np.ndarray:
     """A view's support at the projections of world points (N, 3) [m], `behind` for the points
-    behind the camera, shape (N,)."""
-    pixels, _, depth = view.camera.project_with_jacobian(np.asarray(points, dtype=float))
+    behind the camera, shape (N,); `projection`: the points' projection in the view, if known."""
+    if projection is None:
+        projection = view.camera.project_with_jacobian(np.asarray(points, dtype=float))
+    pixels, _, depth = projection
     width, height = view.support.size
     read = np.empty(len(depth))
     for whole_frame in (False, True):  # the window around the body, unless a point falls outside

@@ -36,7 +36,13 @@ from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.tasks.segments import SegmentCriterion, segment_ends
 from ibik_pin.vision.camera import CameraLike, Projection
-from ibik_pin.vision.kernels import MIN_DEPTH, axis_value_and_frame_gradient, candidate_axis_values
+from ibik_pin.vision.kernels import (
+    MIN_DEPTH,
+    axis_value_and_frame_gradient,
+    candidate_axis_values,
+    nearest_of_rows,
+    segment_squared_distances,
+)
 from ibik_pin.vision.pinhole import projector
 
 __all__ = ["AxisView", "SilhouetteAxisTask"]
@@ -89,6 +95,7 @@ class SilhouetteAxisTask(SegmentCriterion):
             body, segments, "the silhouette-axis task"
         )
         self.views: list[AxisView] = []
+        self._changing: dict[bytes | None, tuple[np.ndarray, np.ndarray]] = {}
         self.set_views(views)
 
     def set_views(self, views: Sequence[AxisView]) -> None:
@@ -127,8 +134,9 @@ class SilhouetteAxisTask(SegmentCriterion):
         of every axis sample to every segment (S, N) [px^2]."""
         known = []
         for view, (pixels, _, depth) in zip(self._active_views, self._project(frame_positions), strict=True):
-            distances = _squared_distances(view.pixels, pixels[None, self._start_index], pixels[None, self._end_index])
-            known.append((pixels, depth > MIN_DEPTH, distances[0]))
+            distances = np.empty((len(self.segments), len(view.pixels)))
+            segment_squared_distances(view.pixels, pixels[self._start_index], pixels[self._end_index], distances)
+            known.append((pixels, depth > MIN_DEPTH, distances))
         return known
 
     def values_at(self, frame_positions: np.ndarray, moved: np.ndarray | None = None,
@@ -141,29 +149,39 @@ class SilhouetteAxisTask(SegmentCriterion):
         """
         known = cast(list | None, pose) if moved is not None else None
         candidates = frame_positions.shape[0]
-        changing = np.ones(len(self.segments), dtype=bool)
-        if moved is not None:
-            # np.isin's sorting costs a hundred microseconds; the moved rows are one or two.
-            changing = ((self._start_index[:, None] == moved) | (self._end_index[:, None] == moved)).any(axis=1)
+        changing, still = self._changing_segments(moved)
         values = np.zeros(candidates)
         counts = np.zeros(candidates)
         placed = _project_candidates(self._project, frame_positions, moved,
                                      None if known is None else [at_pose[:2] for at_pose in known])
         for index, (view, (pixels, visible)) in enumerate(zip(self._active_views, placed, strict=True)):
-            at_pose = None if known is None else known[index]
-            starts, ends = pixels[:, self._start_index[changing]], pixels[:, self._end_index[changing]]
-            if changing.all():
-                fixed = np.full(len(view.pixels), np.inf)
+            fixed = np.empty(len(view.pixels))  # the squared distance to the segments every candidate shares
+            if known is not None:
+                nearest_of_rows(known[index][2], still, fixed)
             else:
-                fixed = (at_pose[2][~changing].min(axis=0) if at_pose is not None else
-                         _squared_distances(view.pixels, pixels[:1, self._start_index[~changing]],
-                                            pixels[:1, self._end_index[~changing]])[0].min(axis=0))
+                distances = np.empty((len(still), len(view.pixels)))
+                segment_squared_distances(view.pixels, pixels[0, self._start_index[still]],
+                                          pixels[0, self._end_index[still]], distances)
+                nearest_of_rows(distances, np.arange(len(still)), fixed)
             view_values = np.empty(candidates)
-            candidate_axis_values(view.pixels, np.ascontiguousarray(starts), np.ascontiguousarray(ends), fixed,
-                                  view.robust_scale_px, view_values)
+            candidate_axis_values(view.pixels, pixels[:, self._start_index[changing]],
+                                  pixels[:, self._end_index[changing]], fixed, view.robust_scale_px, view_values)
             values += np.where(visible, view_values, 0.0)
             counts += visible
         return values / np.maximum(counts, 1)
+
+    def _changing_segments(self, moved: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """The segments that a `moved` row ends and the others, as index arrays (kept per set of
+        rows; without `moved`, every segment changes)."""
+        key = None if moved is None else np.asarray(moved).tobytes()
+        kept = self._changing.get(key)
+        if kept is None:
+            changing = np.ones(len(self.segments), dtype=bool)
+            if moved is not None:
+                # np.isin's sorting costs a hundred microseconds; the moved rows are one or two.
+                changing = ((self._start_index[:, None] == moved) | (self._end_index[:, None] == moved)).any(axis=1)
+            kept = self._changing[key] = (np.flatnonzero(changing), np.flatnonzero(~changing))
+        return kept
 
     def compute_value(self, configuration: Configuration) -> float:
         return self._evaluate(configuration)[0]
@@ -194,23 +212,3 @@ def _project_candidates(project: Callable[[np.ndarray], list[Projection]], frame
         in_front[:, moved] = moving_depth.reshape(candidates, len(moved)) > MIN_DEPTH
         placed.append((pixels, np.all(in_front, axis=1)))
     return placed
-
-
-def _squared_distances(samples: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
-    """Squared distance [px^2] of each sample (N, 2) to each segment (C, S, 2), shape (C, S, N)."""
-    along_u = (ends[..., 0] - starts[..., 0])[..., None]  # (C, S, 1)
-    along_v = (ends[..., 1] - starts[..., 1])[..., None]
-    length_squared = np.maximum(along_u * along_u + along_v * along_v, 1e-12)
-    # (C, S, N), u and v apart and in place: the smallest temporaries for the search's many candidates.
-    offset_u = samples[:, 0] - starts[..., 0:1]  # (C, S, N)
-    offset_v = samples[:, 1] - starts[..., 1:2]
-    s = offset_u * along_u
-    s += offset_v * along_v
-    s /= length_squared
-    np.clip(s, 0.0, 1.0, out=s)
-    offset_u -= s * along_u
-    offset_v -= s * along_v
-    np.multiply(offset_u, offset_u, out=offset_u)
-    np.multiply(offset_v, offset_v, out=offset_v)
-    offset_u += offset_v
-    return offset_u

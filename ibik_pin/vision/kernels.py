@@ -16,7 +16,8 @@ in one call per view.
 - :func:`axis_value_and_pixel_gradient`: the silhouette-axis term of one view and its derivative
   with respect to the projected segment ends (:func:`axis_value_and_frame_gradient`: with respect
   to the ends in the world); :func:`candidate_axis_values`: its values at the
-  swivel search's candidates (:mod:`ibik_pin.tasks.silhouette_axis`).
+  swivel search's candidates, from the samples' distances to the segments the candidates share
+  (:func:`segment_squared_distances`, :func:`nearest_of_rows`) (:mod:`ibik_pin.tasks.silhouette_axis`).
 
 They are compiled on first use and cached on disk (Numba's ``cache=True``), so only the first run
 on a machine pays the compilation (a few seconds).
@@ -28,8 +29,8 @@ import numpy as np
 from numba import njit
 
 __all__ = ["MIN_DEPTH", "axis_value_and_frame_gradient", "axis_value_and_pixel_gradient", "candidate_axis_values",
-           "pinhole_parameters", "pinhole_project", "pinhole_project_views", "support_overlap_at_segments",
-           "support_sample", "support_values"]
+           "nearest_of_rows", "pinhole_parameters", "pinhole_project", "pinhole_project_views",
+           "segment_squared_distances", "support_overlap_at_segments", "support_sample", "support_values"]
 
 # A point nearer the camera plane than this [m] is behind it: it reads 0 and pulls nowhere.
 MIN_DEPTH = 1e-6
@@ -202,6 +203,31 @@ def support_values(pixels, depth, support, row0, column0, width, height, behind,
             return False
         values[m] = value
     return True
+
+
+@njit(cache=True, nogil=True)
+def segment_squared_distances(samples, starts, ends, distances):
+    """Squared distance [px^2] of each sample (N, 2) to each segment from starts (S, 2) to ends
+    (S, 2): writes distances (S, N)."""
+    for k in range(starts.shape[0]):
+        along_u, along_v = ends[k, 0] - starts[k, 0], ends[k, 1] - starts[k, 1]
+        length_squared = max(along_u * along_u + along_v * along_v, 1e-12)
+        for i in range(samples.shape[0]):
+            offset_u, offset_v = samples[i, 0] - starts[k, 0], samples[i, 1] - starts[k, 1]
+            s = min(max((offset_u * along_u + offset_v * along_v) / length_squared, 0.0), 1.0)
+            offset_u -= s * along_u
+            offset_v -= s * along_v
+            distances[k, i] = offset_u * offset_u + offset_v * offset_v
+
+
+@njit(cache=True, nogil=True)
+def nearest_of_rows(distances, rows, nearest):
+    """Per sample, the smallest of distances (S, N) over the segments `rows` (R,): writes nearest
+    (N,) (inf without rows)."""
+    nearest[:] = np.inf
+    for k in rows:
+        for i in range(distances.shape[1]):
+            nearest[i] = min(nearest[i], distances[k, i])
 
 
 @njit(cache=True, nogil=True)
