@@ -60,6 +60,23 @@ def test_frame_positions_follow_every_update_as_pinocchio_gives_them(human, rng)
         assert np.array_equal(configuration.frame_position(int(frames[-1])), expected[-1])
 
 
+def test_frames_asked_in_turn_read_pinocchios_positions_by_the_strided_view_and_without_it(human, rng):
+    """The one view over data.oMf's translations (and the frame-by-frame read where it is not
+    used) give Pinocchio's positions, for sets of frames that grow as the tasks ask."""
+    data = human.model.createData()
+    for strided in (True, False):
+        configuration = Configuration(human.model)
+        assert (configuration._translations is not None) is True  # the layout the view needs, seen
+        if not strided:
+            configuration._translations = None
+        for frames in (np.array([3, 8]), np.array([8, 20, 5]), np.arange(human.model.nframes)[::-1]):
+            q = random_human_configuration(human, rng)
+            configuration.update(q)
+            pin.framesForwardKinematics(human.model, data, q)
+            expected = np.array([data.oMf[int(frame)].translation for frame in frames])
+            assert np.array_equal(configuration.frame_positions(frames), expected)
+
+
 def test_frame_jacobians_are_pinocchios_for_every_frame_and_follow_updates(human, rng):
     """All at once from the joint Jacobians, as getFrameJacobian (LOCAL_WORLD_ALIGNED) gives them one
     frame at a time, on the free-flyer human and the fixed-base arm; a single frame's too."""
