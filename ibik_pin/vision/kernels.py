@@ -304,46 +304,42 @@ def axis_value_and_pixel_gradient(samples, end_pixels, start_index, end_index, s
     """
     count = samples.shape[0]
     segments = start_index.shape[0]
-    total = 0.0
     inverse_scale_squared = 1.0 / (scale * scale)
-    # Each segment's start, direction and 1 / length^2, once for all samples.
-    start_u, start_v = np.empty(segments), np.empty(segments)
-    along_u, along_v, inverse_length_squared = np.empty(segments), np.empty(segments), np.empty(segments)
+    # Segment by segment over all samples, the nearest so far kept per sample: long loops without
+    # branches, which the compiler vectorises (a third faster than sample by sample).
+    sample_u, sample_v = np.ascontiguousarray(samples[:, 0]), np.ascontiguousarray(samples[:, 1])
+    best = np.full(count, np.inf)
+    best_segment = np.zeros(count, dtype=np.int64)
     for segment in range(segments):
         a, b = start_index[segment], end_index[segment]
-        start_u[segment], start_v[segment] = end_pixels[a, 0], end_pixels[a, 1]
-        along_u[segment] = end_pixels[b, 0] - end_pixels[a, 0]
-        along_v[segment] = end_pixels[b, 1] - end_pixels[a, 1]
-        inverse_length_squared[segment] = 1.0 / max(along_u[segment] ** 2 + along_v[segment] ** 2, 1e-12)
-    # Every segment's distance first, in a loop without branches that the compiler vectorises,
-    # then the nearest: a third faster than one loop keeping the best as it goes.
-    distances = np.empty(segments)
+        start_u, start_v = end_pixels[a, 0], end_pixels[a, 1]
+        along_u, along_v = end_pixels[b, 0] - start_u, end_pixels[b, 1] - start_v
+        inverse_length_squared = 1.0 / max(along_u * along_u + along_v * along_v, 1e-12)
+        for i in range(count):
+            offset_u = sample_u[i] - start_u
+            offset_v = sample_v[i] - start_v
+            s = min(max((offset_u * along_u + offset_v * along_v) * inverse_length_squared, 0.0), 1.0)
+            offset_u -= s * along_u  # the residual: sample minus closest point
+            offset_v -= s * along_v
+            distance_squared = offset_u * offset_u + offset_v * offset_v
+            closer = distance_squared < best[i]  # strict: the first of equals stays
+            best[i] = distance_squared if closer else best[i]
+            best_segment[i] = segment if closer else best_segment[i]
+    total = 0.0
     for i in range(count):
-        su, sv = samples[i, 0], samples[i, 1]
-        for segment in range(segments):
-            offset_u = su - start_u[segment]
-            offset_v = sv - start_v[segment]
-            s = (offset_u * along_u[segment] + offset_v * along_v[segment]) * inverse_length_squared[segment]
-            s = min(max(s, 0.0), 1.0)
-            offset_u -= s * along_u[segment]  # the residual: sample minus closest point
-            offset_v -= s * along_v[segment]
-            distances[segment] = offset_u * offset_u + offset_v * offset_v
-        best, best_segment = np.inf, 0
-        for segment in range(segments):
-            if distances[segment] < best:
-                best, best_segment = distances[segment], segment
         # The nearest segment's closest point again, by the same arithmetic.
-        offset_u = su - start_u[best_segment]
-        offset_v = sv - start_v[best_segment]
-        best_s = (offset_u * along_u[best_segment] + offset_v * along_v[best_segment]) * \
-            inverse_length_squared[best_segment]
-        best_s = min(max(best_s, 0.0), 1.0)
-        best_u = offset_u - best_s * along_u[best_segment]
-        best_v = offset_v - best_s * along_v[best_segment]
-        weight = np.exp(-best * inverse_scale_squared)
+        a, b = start_index[best_segment[i]], end_index[best_segment[i]]
+        start_u, start_v = end_pixels[a, 0], end_pixels[a, 1]
+        along_u, along_v = end_pixels[b, 0] - start_u, end_pixels[b, 1] - start_v
+        inverse_length_squared = 1.0 / max(along_u * along_u + along_v * along_v, 1e-12)
+        offset_u = sample_u[i] - start_u
+        offset_v = sample_v[i] - start_v
+        best_s = min(max((offset_u * along_u + offset_v * along_v) * inverse_length_squared, 0.0), 1.0)
+        best_u = offset_u - best_s * along_u
+        best_v = offset_v - best_s * along_v
+        weight = np.exp(-best[i] * inverse_scale_squared)
         total += 1.0 - weight
         pull = weight / (scale * count)
-        a, b = start_index[best_segment], end_index[best_segment]
         pixel_gradient[a, 0] += (1.0 - best_s) * pull * best_u
         pixel_gradient[a, 1] += (1.0 - best_s) * pull * best_v
         pixel_gradient[b, 0] += best_s * pull * best_u
