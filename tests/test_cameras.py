@@ -89,8 +89,9 @@ def test_pinhole_jacobian_matches_central_finite_differences_with_full_distortio
 
 
 def test_a_projector_gives_each_cameras_projection_to_the_bit():
-    """Pinhole cameras projected in one compiled call, a mixed list camera by camera."""
-    from ibik_pin.vision.pinhole import projector
+    """Pinhole cameras projected in one compiled call, a mixed list camera by camera; the pixels
+    and depth alone (pixel_projector) the same."""
+    from ibik_pin.vision.pinhole import pixel_projector, projector
 
     rng = np.random.default_rng(3)
     pinholes = [look_at_camera(f"c{k}", (640, 480), 600.0 + 50 * k, rng.normal(0.0, 1.0, 3) + [0.0, 0.0, 5.0],
@@ -100,9 +101,13 @@ def test_a_projector_gives_each_cameras_projection_to_the_bit():
     for cameras in (pinholes, [pinholes[0], orthographic], []):
         projections = projector(cameras)(points)
         assert len(projections) == len(cameras)
-        for camera, projection in zip(cameras, projections, strict=True):
-            for mine, reference in zip(projection, camera.project_with_jacobian(points), strict=True):
-                np.testing.assert_array_equal(mine, reference)
+        for camera, projection, (pixels, depth) in zip(cameras, projections, pixel_projector(cameras)(points),
+                                                       strict=True):
+            reference = camera.project_with_jacobian(points)
+            for mine, expected in zip(projection, reference, strict=True):
+                np.testing.assert_array_equal(mine, expected)
+            np.testing.assert_array_equal(pixels, reference.pixels)
+            np.testing.assert_array_equal(depth, reference.depth)
 
 
 def test_pinhole_depth_is_the_z_coordinate_in_the_camera_frame():

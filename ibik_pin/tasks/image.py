@@ -27,7 +27,7 @@ from ibik_pin.model import BodyModel
 from ibik_pin.tasks.segments import SegmentCriterion, segment_ends
 from ibik_pin.vision.camera import CameraLike, Projection
 from ibik_pin.vision.kernels import support_overlap_at_segments, support_values
-from ibik_pin.vision.pinhole import projector
+from ibik_pin.vision.pinhole import pixel_projector, projector
 from ibik_pin.vision.support import SupportImageLike
 
 
@@ -114,6 +114,7 @@ class ImageTask(SegmentCriterion):
                 )
         self._active_views = [v for v in self.views if v.support.enabled]
         self._project = projector([view.camera for view in self._active_views])
+        self._pixels = pixel_projector([view.camera for view in self._active_views])
         self._changing: dict[bytes, np.ndarray] = {}
         self.enabled = bool(self._active_views)
         self._cache_version = -1
@@ -184,16 +185,16 @@ class ImageTask(SegmentCriterion):
     def _support_values(self, points: np.ndarray) -> list[np.ndarray]:
         """Per view, the support at (C, M, 3) points [m] (0 behind the camera), shape (C, M)."""
         flat = np.ascontiguousarray(points).reshape(-1, 3)
-        return [support_at(view, flat, projection=projection).reshape(points.shape[:2])
-                for view, projection in zip(self._active_views, self._project(flat), strict=True)]
+        return [support_at(view, flat, projected=projected).reshape(points.shape[:2])
+                for view, projected in zip(self._active_views, self._pixels(flat), strict=True)]
 
     def inside_silhouettes(self, points: np.ndarray, tolerance_px: float = 2.0) -> np.ndarray:
         """(N,) bool: each world point (N, 3) [m] projects inside the silhouette, or within
         `tolerance_px` of it, in every enabled view (the support is a signed distance, positive
         inside: the silhouette's border is 0; a point behind a camera is outside)."""
         inside = np.ones(len(points), dtype=bool)
-        for view, projection in zip(self._active_views, self._project(points), strict=True):
-            inside &= support_at(view, points, behind=-np.inf, projection=projection) > -float(tolerance_px)
+        for view, projected in zip(self._active_views, self._pixels(points), strict=True):
+            inside &= support_at(view, points, behind=-np.inf, projected=projected) > -float(tolerance_px)
         return inside
 
     def compute_value(self, configuration: Configuration) -> float:
@@ -217,12 +218,14 @@ def _read_view(view: View, projection: Projection, sample_start: np.ndarray, sam
     return total
 
 
-def support_at(view: View, points: np.ndarray, behind: float = 0.0, projection: Projection | None = None) -> np.ndarray:
+def support_at(view: View, points: np.ndarray, behind: float = 0.0,
+               projected: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """A view's support at the projections of world points (N, 3) [m], `behind` for the points
-    behind the camera, shape (N,); `projection`: the points' projection in the view, if known."""
-    if projection is None:
+    behind the camera, shape (N,); `projected`: the points' pixels and depth in the view, if known."""
+    if projected is None:
         projection = view.camera.project_with_jacobian(np.asarray(points, dtype=float))
-    pixels, _, depth = projection
+        projected = projection.pixels, projection.depth
+    pixels, depth = projected
     width, height = view.support.size
     read = np.empty(len(depth))
     for whole_frame in (False, True):  # the window around the body, unless a point falls outside

@@ -35,7 +35,7 @@ from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.tasks.segments import SegmentCriterion, segment_ends
-from ibik_pin.vision.camera import CameraLike, Projection
+from ibik_pin.vision.camera import CameraLike
 from ibik_pin.vision.kernels import (
     MIN_DEPTH,
     axis_value_and_frame_gradient,
@@ -43,7 +43,7 @@ from ibik_pin.vision.kernels import (
     nearest_of_rows,
     segment_squared_distances,
 )
-from ibik_pin.vision.pinhole import projector
+from ibik_pin.vision.pinhole import pixel_projector, projector
 
 __all__ = ["AxisView", "SilhouetteAxisTask"]
 
@@ -103,6 +103,7 @@ class SilhouetteAxisTask(SegmentCriterion):
         self.views = list(views)
         self._active_views = [view for view in self.views if len(view.pixels)]
         self._project = projector([view.camera for view in self._active_views])
+        self._pixels = pixel_projector([view.camera for view in self._active_views])
         self.enabled = bool(self._active_views)
         self._cache_version = -1
         self._cache: tuple[float, np.ndarray] | None = None
@@ -133,7 +134,7 @@ class SilhouetteAxisTask(SegmentCriterion):
         """Per view: the ends' pixels (K, 2), whether each is in front (K,), and the squared distance
         of every axis sample to every segment (S, N) [px^2]."""
         known = []
-        for view, (pixels, _, depth) in zip(self._active_views, self._project(frame_positions), strict=True):
+        for view, (pixels, depth) in zip(self._active_views, self._pixels(frame_positions), strict=True):
             distances = np.empty((len(self.segments), len(view.pixels)))
             segment_squared_distances(view.pixels, pixels[self._start_index], pixels[self._end_index], distances)
             known.append((pixels, depth > MIN_DEPTH, distances))
@@ -152,7 +153,7 @@ class SilhouetteAxisTask(SegmentCriterion):
         changing, still = self._changing_segments(moved)
         values = np.zeros(candidates)
         counts = np.zeros(candidates)
-        placed = _project_candidates(self._project, frame_positions, moved,
+        placed = _project_candidates(self._pixels, frame_positions, moved,
                                      None if known is None else [at_pose[:2] for at_pose in known])
         for index, (view, (pixels, visible)) in enumerate(zip(self._active_views, placed, strict=True)):
             fixed = np.empty(len(view.pixels))  # the squared distance to the segments every candidate shares
@@ -190,21 +191,22 @@ class SilhouetteAxisTask(SegmentCriterion):
         return self._evaluate(configuration)[1]
 
 
-def _project_candidates(project: Callable[[np.ndarray], list[Projection]], frame_positions: np.ndarray,
-                        moved: np.ndarray | None, shared: list[tuple[np.ndarray, np.ndarray]] | None = None
+def _project_candidates(project: Callable[[np.ndarray], list[tuple[np.ndarray, np.ndarray]]],
+                        frame_positions: np.ndarray, moved: np.ndarray | None,
+                        shared: list[tuple[np.ndarray, np.ndarray]] | None = None
                         ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Per view (`project`: points -> each view's projection), pixels (C, K, 2) of (C, K, 3)
+    """Per view (`project`: points -> each view's pixels and depth), pixels (C, K, 2) of (C, K, 3)
     placements and whether each candidate has every end in front of the camera (C,); the rows not
     `moved` are the same in every candidate, so projected once (or taken from `shared`: per view,
     pixels (K, 2) and in front (K,) of a pose with those rows)."""
     candidates, frames = frame_positions.shape[:2]
     if moved is None:
         return [(pixels.reshape(candidates, frames, 2), np.all(depth.reshape(candidates, frames) > MIN_DEPTH, axis=1))
-                for pixels, _, depth in project(frame_positions.reshape(-1, 3))]
+                for pixels, depth in project(frame_positions.reshape(-1, 3))]
     if shared is None:
-        shared = [(pixels, depth > MIN_DEPTH) for pixels, _, depth in project(frame_positions[0])]
+        shared = [(pixels, depth > MIN_DEPTH) for pixels, depth in project(frame_positions[0])]
     placed = []
-    for (shared_pixels, shared_in_front), (moving, _, moving_depth) in zip(
+    for (shared_pixels, shared_in_front), (moving, moving_depth) in zip(
             shared, project(frame_positions[:, moved].reshape(-1, 3)), strict=True):
         pixels = np.repeat(shared_pixels[None], candidates, axis=0)
         pixels[:, moved] = moving.reshape(candidates, len(moved), 2)

@@ -16,9 +16,9 @@ import numpy as np
 from ibik_pin.checks import as_finite_array, as_image_size, as_radii
 from ibik_pin.exceptions import InputError
 from ibik_pin.vision.camera import Camera, CameraLike, Projection, _as_points, _read_only, _rotation_from_rodrigues
-from ibik_pin.vision.kernels import pinhole_parameters, pinhole_project, pinhole_project_views
+from ibik_pin.vision.kernels import pinhole_parameters, pinhole_pixels_views, pinhole_project, pinhole_project_views
 
-__all__ = ["PinholeCamera", "look_at_camera", "projector"]
+__all__ = ["PinholeCamera", "look_at_camera", "pixel_projector", "projector"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -142,6 +142,24 @@ def projector(cameras: Sequence[CameraLike]) -> Callable[[np.ndarray], list[Proj
         pixels, jacobian, depth = np.empty((views, count, 2)), np.empty((views, count, 2, 3)), np.empty((views, count))
         pinhole_project_views(points, parameters, pixels, jacobian, depth)
         return [Projection(pixels[view], jacobian[view], depth[view]) for view in range(views)]
+
+    return project
+
+
+def pixel_projector(cameras: Sequence[CameraLike]) -> Callable[[np.ndarray], list[tuple[np.ndarray, np.ndarray]]]:
+    """points (N, 3) -> each camera's pixels (N, 2) and depth (N,), without the Jacobian: what a
+    reading of values needs (pinhole cameras all in one compiled call, as `projector`)."""
+    cameras = list(cameras)
+    if not cameras or not all(isinstance(camera, PinholeCamera) for camera in cameras):
+        return lambda points: [(projection.pixels, projection.depth) for projection in
+                               (camera.project_with_jacobian(points) for camera in cameras)]
+    parameters = np.array([cast(PinholeCamera, camera).kernel_parameters for camera in cameras])
+
+    def project(points: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+        points = np.ascontiguousarray(_as_points(points), dtype=np.float64)
+        pixels, depth = np.empty((len(parameters), points.shape[0], 2)), np.empty((len(parameters), points.shape[0]))
+        pinhole_pixels_views(points, parameters, pixels, depth)
+        return [(pixels[view], depth[view]) for view in range(len(parameters))]
 
     return project
 
