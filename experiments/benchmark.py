@@ -63,7 +63,7 @@ PARTS = {
     "projection and sampling": ("pinhole.py", "camera.py", "tasks/image.py", "silhouette_axis.py", "segments.py"),
     "support images": ("support.py", "medial_axis.py", "distanceTransform", "views.py", "GaussianBlur"),
     "QP": ("_solve_level", "proxsuite", "_polish"),
-    "linear algebra": ("nullspace.py", "linalg", "einsum", "projection.py"),
+    "linear algebra": ("nullspace.py", "level_loop.py", "solvers/kernels.py", "linalg", "einsum", "projection.py"),
     "solver and task bookkeeping": ("solvers/", "tasks/", "swivel.py", "tracker.py", "outcomes.py", "limits.py"),
     "reading masks, subject calibration, writing outputs": ("imread", "masks.py", "silhouette_files.py",
                                                             "subject/", "io/", "imwrite"),
