@@ -69,6 +69,19 @@ def cholesky_solve(triangle, right):
     return x
 
 
+@njit(cache=True, nogil=True, inline="always")
+def reflect(row, reflector, j, tau):
+    """row[j:] (I - tau v v^T), v = (1, reflector[j + 1:]): the Householder reflection H_j applied to
+    a vector stored as a row, in place."""
+    dot = row[j]
+    for i in range(j + 1, row.shape[0]):
+        dot += reflector[i] * row[i]
+    dot *= tau
+    row[j] -= dot
+    for i in range(j + 1, row.shape[0]):
+        row[i] -= dot * reflector[i]
+
+
 @njit(cache=True, nogil=True)
 def factor(projected, damping):
     """The damped least squares' factors of a level's projected Jacobian M (m, r), and its null space.
@@ -114,27 +127,15 @@ def factor(projected, damping):
             work[j, i] *= scale
         taus[j] = (beta - alpha) / beta
         work[j, j] = beta
-        for c in range(j + 1, rows):  # H_j = I - tau v v^T on the columns to the right
-            dot = work[c, j]
-            for i in range(j + 1, size):
-                dot += work[j, i] * work[c, i]
-            dot *= taus[j]
-            work[c, j] -= dot
-            for i in range(j + 1, size):
-                work[c, i] -= dot * work[j, i]
+        for c in range(j + 1, rows):  # H_j on the columns to the right
+            reflect(work[c], work[j], j, taus[j])
         rank = j + 1
     # Q = H_0 ... H_{k-1}, accumulated backwards on its transpose (rows of qt are columns of Q):
     # before H_j, the columns left of j are still those of the identity, which H_j leaves alone.
     qt = np.eye(size)
     for j in range(rank - 1, -1, -1):
         for c in range(j, size):
-            dot = qt[c, j]
-            for i in range(j + 1, size):
-                dot += work[j, i] * qt[c, i]
-            dot *= taus[j]
-            qt[c, j] -= dot
-            for i in range(j + 1, size):
-                qt[c, i] -= dot * work[j, i]
+            reflect(qt[c], work[j], j, taus[j])
     reduced = np.zeros((rank, rows))  # (M Q_k)^T = R_k P^T
     for c in range(rows):
         for i in range(min(c + 1, rank)):
@@ -149,7 +150,8 @@ def factor(projected, damping):
 
 @njit(cache=True, nogil=True)
 def damped_solve(projected, residual, damping):
-    """w of the damped least squares and the null space left (see `damped_solve`), and success.
+    """w of the damped least squares and the null space left (see nullspace.damped_solve), and
+    success.
 
     Columns of the matrix that are zero (directions the level's rows do not move: the legs for the
     hands' targets) take no step and stay free; only the others are factored. On the tracker's

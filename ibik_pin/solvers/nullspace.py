@@ -10,10 +10,6 @@ Cholesky solve of its smaller normal equations only; rows that each hold one coo
 factorisation. A gradient level uses up one direction. The arithmetic is compiled, in
 :mod:`ibik_pin.solvers.kernels` with the level loop that calls it; these are its entry points from
 Python (the level outcomes' reports, tests).
-
-Why compiled: the levels are small (at most 44 columns and 38 rows on the human), and on real
-boxing each of their numpy and LAPACK calls cost microseconds of wrapper around a few hundred
-nanoseconds of arithmetic.
 """
 
 from __future__ import annotations

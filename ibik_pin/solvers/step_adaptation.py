@@ -36,7 +36,7 @@ class StepAdaptation:
     def state(self, task: GradientTask, nv: int) -> tuple[np.ndarray, np.ndarray]:
         """The task's state row (4,) and previous direction (nv,) that `adapt_step_size` updates."""
         entry = self._steps.get(id(task))
-        if entry is None or entry[2].size != nv:
+        if entry is None or entry[2].size != nv:  # (a task stepped on another model starts afresh)
             state = np.array([task.max_step_size, task.min_step_size, task.max_step_size, 0.0])
             entry = (task, state, np.zeros(nv))
             self._steps[id(task)] = entry
