@@ -21,7 +21,8 @@ in one call per view.
   (:func:`segment_squared_distances`, :func:`nearest_of_rows`) (:mod:`ibik_pin.tasks.silhouette_axis`).
 
 They are compiled on first use and cached on disk (Numba's ``cache=True``), so only the first run
-on a machine pays the compilation (a few seconds).
+on a machine pays the compilation (these a few seconds; with the solvers' level loop,
+:mod:`ibik_pin.solvers.kernels`, about 25 s on a 2-core machine).
 """
 
 from __future__ import annotations
