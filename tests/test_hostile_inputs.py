@@ -465,7 +465,7 @@ def test_sigterm_while_solving_exits_143_and_leaves_the_previous_output_and_no_s
     time.sleep(0.5)
     process.send_signal(signal.SIGTERM)
     _, error = process.communicate(timeout=60)
-    assert process.returncode == 143
+    assert process.returncode == 143, error  # what the run printed, if it ended otherwise
     assert error.strip().splitlines()[-1] == "ibik: terminated" and "Traceback" not in error
     assert tree_digest(case.root) == before
 
