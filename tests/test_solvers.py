@@ -433,6 +433,23 @@ def test_rows_that_each_hold_one_coordinate_take_the_qr_factorisations_step_and_
     assert not coordinate_solve(mixed, residual, DEFAULT_DAMPING)[2]
 
 
+def test_a_level_proxsuite_solves_hands_on_the_null_space_it_leaves_even_when_none_is_left():
+    """A full-rank top level (a posture on every coordinate of the arm) that the bounds reach,
+    solved by proxsuite: the level below it gets no freedom, so the step is the top level's alone."""
+    body = load_arm()
+    configuration = Configuration(body.model, np.array([0.3, 0.4, 0.2, 0.9, 0.1, 0.5]))
+    posture = PostureTask(body.model, reference=np.array([1.0, -0.5, 0.8, 0.1, 0.9, -0.4]),
+                          coordinates=np.ones(body.model.nv, dtype=bool))
+    wrist = FramePositionTask(body.model, body.keypoints["Wrist"], np.array([0.2, 0.1, 0.3]))
+    limits = JointLimits(body.model, max_step=0.05)  # the posture's step leaves this box
+    for active_set in (False, True):
+        solver = HierarchicalQPSolver(limits=limits, active_set=active_set)
+        alone = solver.compute_step(configuration, [[posture]]).dq
+        stacked = solver.compute_step(configuration, [[posture], [wrist]]).dq
+        assert np.abs(alone).max() == pytest.approx(0.05)  # the bounds were reached
+        np.testing.assert_allclose(stacked, alone, rtol=0, atol=1e-9)
+
+
 def test_a_proxsuite_failure_skips_its_level_and_is_reported_failed(human, monkeypatch):
     """A backend failure is recoverable: no foreign exception leaks, the level reads "failed"."""
     import proxsuite

@@ -122,7 +122,7 @@ class HierarchicalQPSolver(Solver):
             else:
                 # proxsuite meets the bounds to eps_abs; clip so the limits hold exactly.
                 dq = (dq + null_basis @ w).clip(lower, upper)
-                if remaining.size:
+                if remaining.shape[0]:  # (0, 0) for the last level: nothing follows it
                     null_basis = null_basis @ remaining
             start = stopped + 1
         packed.finish()
