@@ -95,6 +95,7 @@ class ImageTask(SegmentCriterion):
         # The same, per sample: its segment's two end rows and its s.
         self._sample_start, self._sample_end = np.repeat(starts, n), np.repeat(ends, n)
         self._sample_fraction = np.tile(s, len(segments))
+        self._changing: dict[bytes, np.ndarray] = {}  # values_at's changing samples per moved rows
         self.segments = segments
         self.views: list[View] = []
         self.set_views(views)
@@ -115,7 +116,6 @@ class ImageTask(SegmentCriterion):
         self._active_views = [v for v in self.views if v.support.enabled]
         self._project = projector([view.camera for view in self._active_views])
         self._pixels = pixel_projector([view.camera for view in self._active_views])
-        self._changing: dict[bytes, np.ndarray] = {}
         self.enabled = bool(self._active_views)
         self._cache_version = -1
 
