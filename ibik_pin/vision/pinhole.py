@@ -46,7 +46,6 @@ class PinholeCamera(Camera):
     distortion: np.ndarray
     rotation: np.ndarray
     translation: np.ndarray
-    _distortion_terms: tuple[float, float, float, float, float] = field(init=False, repr=False)
     kernel_parameters: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -61,11 +60,9 @@ class PinholeCamera(Camera):
             raise InputError(f"intrinsics: expected zero skew K[0, 1] (OpenCV's model), found {K[0, 1]}")
         object.__setattr__(self, "intrinsics", _read_only(K))
         object.__setattr__(self, "distortion", _read_only(as_finite_array(self.distortion, [(4,), (5,)], "distortion")))
-        # The coefficients as Python floats, read at every projection (the same products as numpy's scalars).
-        object.__setattr__(self, "_distortion_terms", tuple(float(term) for term in self._coefficients()))
         # What the compiled projection reads (vision.kernels.pinhole_project), built once.
         object.__setattr__(self, "kernel_parameters", _read_only(pinhole_parameters(
-            self.rotation, self.translation, K, self._distortion_terms)))
+            self.rotation, self.translation, K, self._coefficients())))
 
     @classmethod
     def from_rodrigues(
@@ -127,14 +124,22 @@ class PinholeCamera(Camera):
             return np.where(depth > 0.0, self.focal_px * radii / depth, np.nan)
 
 
+def _stacked_parameters(cameras: list[CameraLike]) -> np.ndarray | None:
+    """The cameras' kernel parameters (V, 21) when all are pinhole cameras (one compiled call
+    projects them all), else None (each camera projects itself)."""
+    if not cameras or not all(isinstance(camera, PinholeCamera) for camera in cameras):
+        return None
+    return np.array([cast(PinholeCamera, camera).kernel_parameters for camera in cameras])
+
+
 def projector(cameras: Sequence[CameraLike]) -> Callable[[np.ndarray], list[Projection]]:
     """points (N, 3) -> each camera's project_with_jacobian; pinhole cameras all in one compiled
     call (the same arithmetic: a view's projection is a few microseconds of wrapper, a solver step
     projects every view twice)."""
     cameras = list(cameras)
-    if not cameras or not all(isinstance(camera, PinholeCamera) for camera in cameras):
+    parameters = _stacked_parameters(cameras)
+    if parameters is None:
         return lambda points: [camera.project_with_jacobian(points) for camera in cameras]
-    parameters = np.array([cast(PinholeCamera, camera).kernel_parameters for camera in cameras])
 
     def project(points: np.ndarray) -> list[Projection]:
         points = np.ascontiguousarray(_as_points(points), dtype=np.float64)
@@ -150,16 +155,17 @@ def pixel_projector(cameras: Sequence[CameraLike]) -> Callable[[np.ndarray], lis
     """points (N, 3) -> each camera's pixels (N, 2) and depth (N,), without the Jacobian: what a
     reading of values needs (pinhole cameras all in one compiled call, as `projector`)."""
     cameras = list(cameras)
-    if not cameras or not all(isinstance(camera, PinholeCamera) for camera in cameras):
+    parameters = _stacked_parameters(cameras)
+    if parameters is None:
         return lambda points: [(projection.pixels, projection.depth) for projection in
                                (camera.project_with_jacobian(points) for camera in cameras)]
-    parameters = np.array([cast(PinholeCamera, camera).kernel_parameters for camera in cameras])
 
     def project(points: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
         points = np.ascontiguousarray(_as_points(points), dtype=np.float64)
-        pixels, depth = np.empty((len(parameters), points.shape[0], 2)), np.empty((len(parameters), points.shape[0]))
+        views, count = len(parameters), points.shape[0]
+        pixels, depth = np.empty((views, count, 2)), np.empty((views, count))
         pinhole_pixels_views(points, parameters, pixels, depth)
-        return [(pixels[view], depth[view]) for view in range(len(parameters))]
+        return [(pixels[view], depth[view]) for view in range(views)]
 
     return project
 
