@@ -143,7 +143,8 @@ class RunResult:
     Attributes:
         errors: (F, 4) distance of LElbow, RElbow, LKnee, RKnee to the truth per frame [m].
         residuals_mm: target keypoint -> mean distance of its joints.trc position to its target [mm].
-        wall_seconds: the whole run_track call [s]; solve_fps: its solve frames per second.
+        wall_seconds: the whole run_track call [s]; solve_fps: its solve frames per second;
+        loop_fps: the frames per second of its whole frame loop (silhouettes read, support images).
     """
 
     clip: str
@@ -154,6 +155,7 @@ class RunResult:
     residuals_mm: dict[str, float]
     wall_seconds: float
     solve_fps: float
+    loop_fps: float
 
     @property
     def joint_errors_mm(self) -> dict[str, float]:
@@ -172,7 +174,8 @@ class RunResult:
     def row(self) -> dict:
         return {"clip": self.clip, "kind": self.kind, "variant": self.variant, "condition": self.condition,
                 "errors_mm": self.joint_errors_mm, "mean_mm": self.mean_mm, "judged_mm": self.judged_mm,
-                "residuals_mm": self.residuals_mm, "wall_seconds": self.wall_seconds, "solve_fps": self.solve_fps}
+                "residuals_mm": self.residuals_mm, "wall_seconds": self.wall_seconds, "solve_fps": self.solve_fps,
+                "loop_fps": self.loop_fps}
 
 
 def run_variant(inputs: ClipInputs, chosen: Variant, condition: str, overrides: dict | None = None,
@@ -226,7 +229,7 @@ def run_variant(inputs: ClipInputs, chosen: Variant, condition: str, overrides: 
     distances = np.linalg.norm(positions(estimate, targets.marker_names) - targets.positions, axis=2)
     residuals = {name: float(np.nanmean(distances[:, k]) * 1000.0) for k, name in enumerate(targets.marker_names)}
     return RunResult(inputs.spec.name, inputs.spec.kind, chosen.name, condition, errors, residuals, wall,
-                     float(report["solve_frames_per_second"]))
+                     float(report["solve_frames_per_second"]), float(report["frames_per_second"]))
 
 
 def run_one(clip: str, variant_name: str = "ibik2v", condition: str = "clean", frames: int = 120,

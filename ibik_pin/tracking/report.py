@@ -36,6 +36,9 @@ UNITS = {
     "times_s": "s: the targets TRC's Time column",
     "solve_seconds": "s: wall time of the solves alone (no reading or writing)",
     "solve_frames_per_second": "frames per second of solve_seconds",
+    "loop_seconds": ("s: wall time of the whole frame loop: the solves, reading the silhouettes, building the "
+                     "support images and medial axes (one frame ahead, in a second thread), each frame's checks"),
+    "frames_per_second": "frames per second of loop_seconds",
     "iterations_per_frame": "solver steps per frame after the first",
     "mean_iterations_per_frame": "solver steps of a frame's main solve, mean over the frames after the first",
     "step_tolerance": "rad: the step norm under which a frame's main solve stops (null: never early)",
@@ -224,6 +227,8 @@ class TrackingReport:
         step_tolerance: the settings' step_tolerance [rad], or None.
         mask_filter_radius: temporal majority filter radius of the silhouettes [frames].
         solve_frames_per_second: frames solved per second of solver time [Hz]; None if unmeasured.
+        frames_per_second: frames per second of the whole frame loop, silhouettes read and support
+            images built included [Hz]; None if unmeasured.
         cameras: the cameras whose images were used (empty when blind).
         trc_axes: the TRC's axis convention and how it was chosen.
         end_effector_residual_m: per frame, the mean distance of the present targets to their
@@ -242,6 +247,7 @@ class TrackingReport:
         inside_fraction_per_view: per camera, the fraction of the skeleton inside the silhouette
             at each frame [0-1] (None when the view was disabled).
         solve_seconds: wall time of the solves [s].
+        loop_seconds: wall time of the whole frame loop [s] (see :data:`UNITS`).
         silhouettes: how well each camera's silhouettes hold the projected targets, and their
             area over time (tracking.video_inputs.SilhouetteQuality); None without silhouettes.
         triangulation: with --videos and no --targets, how the targets were triangulated
@@ -273,6 +279,8 @@ class TrackingReport:
     solver_levels: SolverLevelsReport = field(default_factory=SolverLevelsReport)
     inside_fraction_per_view: dict[str, list[float | None]] = field(default_factory=dict)
     solve_seconds: float | None = None
+    frames_per_second: float | None = None
+    loop_seconds: float | None = None
     frames_with_outlier_targets: dict[str, list[str]] = field(default_factory=dict)
     mean_iterations_per_frame: float | None = None
     step_tolerance: float | None = None
@@ -321,7 +329,7 @@ class TrackingReport:
             criterion=settings.criterion,
             iterations_per_frame=settings.iterations,
             mask_filter_radius=settings.mask_filter_radius,
-            solve_frames_per_second=_finite_or_none(result.frames_per_second),
+            solve_frames_per_second=_finite_or_none(result.solve_frames_per_second),
             cameras=list(camera_names),
             trc_axes=TrcAxesReport.from_choice(axes, frame_numbers),
             end_effector_residual_m=ResidualStats.from_values(result.target_residuals),
@@ -338,6 +346,8 @@ class TrackingReport:
                                       for index, name in enumerate(camera_names)
                                       if result.inside_fraction.shape == result.overlap.shape},
             solve_seconds=_finite_or_none(result.solve_seconds),
+            frames_per_second=_finite_or_none(result.frames_per_second),
+            loop_seconds=_finite_or_none(result.loop_seconds),
             mean_iterations_per_frame=(float(np.mean(result.iterations[1:])) if len(result.iterations) > 1
                                        else None),
             step_tolerance=settings.step_tolerance,
@@ -369,8 +379,10 @@ class TrackingReport:
     def summary_lines(self) -> list[str]:
         """For the console: frames, speed and mean end-effector residual [mm], then each target
         keypoint's mean and largest residual [mm], worst first."""
-        speed = (f"{self.solve_frames_per_second:.1f} frames/s" if self.solve_frames_per_second is not None
+        speed = (f"{self.frames_per_second:.1f} frames/s" if self.frames_per_second is not None
                  else "an unmeasured speed")
+        if self.solve_frames_per_second is not None:
+            speed += f" (the solves alone {self.solve_frames_per_second:.1f})"
         overall = self.end_effector_residual_m.mean
         lines = [f"{self.frames} frames at {speed}, mean end-effector residual "
                  + (f"{1000 * overall:.1f} mm" if overall is not None else "not measured (no target present)")]

@@ -12,6 +12,7 @@ alone: the blind PIK baseline (same targets, iterations, initial state and limit
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 import warnings
 from collections.abc import Callable, Sequence
@@ -32,11 +33,12 @@ from ibik_pin.tasks.segments import SegmentCriterion
 from ibik_pin.tasks.silhouette_axis import SilhouetteAxisTask
 from ibik_pin.tasks.weighted_sum import WeightedSum
 from ibik_pin.tracking.first_frame import solve_first_frame
+from ibik_pin.tracking.frame_images import FrameImagesAhead, frame_images
 from ibik_pin.tracking.levels import StackPlan, StackTasks
 from ibik_pin.tracking.outcomes import LevelOutcome, level_outcomes
 from ibik_pin.tracking.stack import CRITERIA, Stack
 from ibik_pin.tracking.swivel import LIMB_ENDS, SwivelSearch, views_cross
-from ibik_pin.tracking.views import axis_views, initial_configuration, make_views, support_caps
+from ibik_pin.tracking.views import initial_configuration, support_caps
 from ibik_pin.vision.segmentation import TemporalMajority
 
 IMAGE_MOVES = ("limbs", "all")
@@ -133,6 +135,8 @@ class TrackingResult:
         dropped_targets: per frame, the targets absent (NaN) in that frame.
         disabled_views: per frame, the cameras whose silhouette was empty.
         solve_seconds: wall time of the solves alone [s].
+        loop_seconds: wall time of the whole frame loop [s]: the solves, reading the silhouettes,
+            building the support images and medial axes, and each frame's checks.
         level_names: the L levels of the stack, highest first (the default stack's: "lower-body
             targets", "upper-body targets", "image" (when the image is used), "posture").
         level_reports: per frame, per level handed to the solver (one per strict stack level, one
@@ -155,6 +159,7 @@ class TrackingResult:
     dropped_targets: list[list[str]] = field(default_factory=list)
     disabled_views: list[list[str]] = field(default_factory=list)
     solve_seconds: float = 0.0
+    loop_seconds: float = 0.0
     target_names: list[str] = field(default_factory=list)
     target_distances: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     level_names: list[str] = field(default_factory=list)
@@ -165,8 +170,14 @@ class TrackingResult:
     iterations: list[int] = field(default_factory=list)
 
     @property
-    def frames_per_second(self) -> float:
+    def solve_frames_per_second(self) -> float:
+        """Frames per second of the solves alone [Hz]; NaN if unmeasured."""
         return len(self.q) / self.solve_seconds if self.solve_seconds > 0 else float("nan")
+
+    @property
+    def frames_per_second(self) -> float:
+        """Frames per second of the whole frame loop [Hz]; NaN if unmeasured."""
+        return len(self.q) / self.loop_seconds if self.loop_seconds > 0 else float("nan")
 
 
 class Tracker:
@@ -340,51 +351,58 @@ class Tracker:
         configuration = Configuration(self.body.model, initial_configuration(self.body, names, targets[0]))
         caps = support_caps(self.cameras, configuration.q[:3]) if use_image else []
         axis_scales = support_caps(self.cameras, configuration.q[:3], self.settings.axis_scale) if use_image else []
-        for frame in range(frame_count):
-            present = np.all(np.isfinite(targets[frame]), axis=1)
-            for k, name in enumerate(names):
-                self.tasks.target_tasks[name].set_target(targets[frame, k] if present[k] else None)
-            result.dropped_targets.append([n for n, p in zip(names, present, strict=True) if not p])
-            disabled: list[str] = []
-            if source is not None:  # the image is used
-                masks = source(frame)
-                views, disabled = make_views(self.cameras, masks, caps)
-                with warnings.catch_warnings():  # empty views are reported per frame instead
-                    warnings.simplefilter("ignore", EmptySilhouetteWarning)
-                    self.image_task.set_views(views)
-                    if self.settings.criterion == "two-way":
-                        self.axis_task.set_views(axis_views(self.cameras, masks, axis_scales))
-            result.disabled_views.append(disabled)
-            self.tasks.start_frame(configuration)
-            # The elbows and knees this frame leaves to the image (for the swivel search).
-            free = [name for name in LIMB_ENDS if name not in names or not present[names.index(name)]]
-            started = time.perf_counter()
-            if frame == 0:
-                solved = solve_first_frame(self.solver, configuration, levels, plan.image_criterion,
-                                           self.settings.first_frame_iterations, self.settings.first_frame_starts,
-                                           blind_levels=plan.blind_levels(),
-                                           solve=lambda configuration, _levels, iterations, free=free: self._solve(
-                                               configuration, plan, iterations, free=free))
-            else:
-                solved = self._solve(configuration, plan, free=free)
-            result.level_reports.append(solved.levels)
-            result.iterations.append(int(solved.iterations))
-            result.solve_seconds += time.perf_counter() - started
-            result.q[frame] = configuration.q
-            result.keypoints[frame] = configuration.frame_positions(keypoint_ids)
-            for k, name in enumerate(names):
-                if present[k]:
-                    result.target_distances[frame, k] = np.linalg.norm(
-                        self.tasks.target_tasks[name].compute_error(configuration))
-            errors = result.target_distances[frame, present]
-            result.target_residuals[frame] = np.mean(errors) if errors.size else np.nan
-            if use_image:
-                result.overlap[frame], result.inside_fraction[frame] = self._overlap_per_view(configuration, disabled)
-            result.limit_hits.append(self.limits.at_limit(configuration.q))
-            result.level_outcomes.append(level_outcomes(plan, configuration, solved.levels, report_index,
-                                                        self.solver.damping))
-            if progress is not None:
-                progress()
+        # Frame t + 1's silhouettes are read and its support images built while frame t is solved.
+        prepare = None if source is None else functools.partial(
+            frame_images, source, self.cameras, caps, axis_scales if self.settings.criterion == "two-way" else None)
+        loop_started = time.perf_counter()
+        with FrameImagesAhead(prepare, frame_count) as images:
+            for frame in range(frame_count):
+                present = np.all(np.isfinite(targets[frame]), axis=1)
+                for k, name in enumerate(names):
+                    self.tasks.target_tasks[name].set_target(targets[frame, k] if present[k] else None)
+                result.dropped_targets.append([n for n, p in zip(names, present, strict=True) if not p])
+                disabled: list[str] = []
+                if source is not None:  # the image is used
+                    prepared = images.get(frame)
+                    disabled = prepared.disabled
+                    with warnings.catch_warnings():  # empty views are reported per frame instead
+                        warnings.simplefilter("ignore", EmptySilhouetteWarning)
+                        self.image_task.set_views(prepared.views)
+                        if prepared.axis_views is not None:
+                            self.axis_task.set_views(prepared.axis_views)
+                result.disabled_views.append(disabled)
+                self.tasks.start_frame(configuration)
+                # The elbows and knees this frame leaves to the image (for the swivel search).
+                free = [name for name in LIMB_ENDS if name not in names or not present[names.index(name)]]
+                started = time.perf_counter()
+                if frame == 0:
+                    solved = solve_first_frame(self.solver, configuration, levels, plan.image_criterion,
+                                               self.settings.first_frame_iterations, self.settings.first_frame_starts,
+                                               blind_levels=plan.blind_levels(),
+                                               solve=lambda configuration, _levels, iterations, free=free: self._solve(
+                                                   configuration, plan, iterations, free=free))
+                else:
+                    solved = self._solve(configuration, plan, free=free)
+                result.level_reports.append(solved.levels)
+                result.iterations.append(int(solved.iterations))
+                result.solve_seconds += time.perf_counter() - started
+                result.q[frame] = configuration.q
+                result.keypoints[frame] = configuration.frame_positions(keypoint_ids)
+                for k, name in enumerate(names):
+                    if present[k]:
+                        result.target_distances[frame, k] = np.linalg.norm(
+                            self.tasks.target_tasks[name].compute_error(configuration))
+                errors = result.target_distances[frame, present]
+                result.target_residuals[frame] = np.mean(errors) if errors.size else np.nan
+                if use_image:
+                    result.overlap[frame], result.inside_fraction[frame] = self._overlap_per_view(configuration,
+                                                                                                  disabled)
+                result.limit_hits.append(self.limits.at_limit(configuration.q))
+                result.level_outcomes.append(level_outcomes(plan, configuration, solved.levels, report_index,
+                                                            self.solver.damping))
+                if progress is not None:
+                    progress()
+        result.loop_seconds = time.perf_counter() - loop_started
         return result
 
     def _overlap_per_view(self, configuration: Configuration, disabled: list[str]) -> tuple[np.ndarray, np.ndarray]:

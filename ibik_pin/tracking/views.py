@@ -8,19 +8,19 @@ each view's support cap (a limb's half width seen at the subject's distance); `m
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Sequence
 
 import numpy as np
 import pinocchio as pin
 
-from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
+from ibik_pin.checks import as_mask
+from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.tasks import View
 from ibik_pin.tasks.silhouette_axis import AxisView
 from ibik_pin.vision.camera import CameraLike
 from ibik_pin.vision.medial_axis import medial_axis_pixels
-from ibik_pin.vision.support import support_from_mask
+from ibik_pin.vision.support import SupportImage, support_from_mask
 
 __all__ = ["LIMB_HALF_WIDTH", "initial_configuration", "support_caps", "make_views", "axis_views"]
 
@@ -76,12 +76,13 @@ def make_views(
         raise InputError(f"expected one silhouette per camera ({len(cameras)}), got {len(masks)}")
     views, disabled = [], []
     for camera, mask, cap in zip(cameras, masks, caps, strict=True):
-        with warnings.catch_warnings():  # empty views are reported per frame instead
-            warnings.simplefilter("ignore", EmptySilhouetteWarning)
-            support = support_from_mask(mask, inside_cap_px=cap)
-        if not support.enabled:
+        # An empty silhouette is reported per frame, not warned of: and catch_warnings, which would
+        # silence support_from_mask's warning, is not thread-safe (frame_images runs this in a thread).
+        if not as_mask(mask).any():
             disabled.append(camera.name)
-        views.append(View(camera, support))
+            views.append(View(camera, SupportImage(np.zeros(mask.shape, np.float32), enabled=False)))
+        else:
+            views.append(View(camera, support_from_mask(mask, inside_cap_px=cap)))
     return views, disabled
 
 

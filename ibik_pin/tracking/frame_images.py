@@ -1,0 +1,90 @@
+"""Each frame's image inputs, prepared one frame ahead in a worker thread.
+
+Reading a frame's silhouettes and building its support images and medial axes needs nothing from
+the solve, and their heavy parts (OpenCV's decoding and distance transforms, numpy on whole images)
+release the GIL. So a worker thread prepares frame t + 1 while the main thread solves frame t, and
+on two cores or more the images cost the tracking loop little of their time.
+
+The worker runs the frames in order, one at a time, so a silhouette source that remembers what it
+read (a temporal filter, the silhouette quality report) sees the same calls as without it. An error
+while preparing a frame is raised when the tracker asks for that frame.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
+from types import TracebackType
+
+import numpy as np
+
+from ibik_pin.tasks import View
+from ibik_pin.tasks.silhouette_axis import AxisView
+from ibik_pin.tracking.views import axis_views, make_views
+from ibik_pin.vision.camera import CameraLike
+
+__all__ = ["FrameImages", "FrameImagesAhead", "frame_images"]
+
+
+@dataclass(frozen=True)
+class FrameImages:
+    """One frame's image inputs.
+
+    Attributes:
+        views: one overlap view per camera; disabled: the cameras whose silhouette is empty.
+        axis_views: one medial-axis view per camera, or None when the criterion needs none.
+    """
+
+    views: list[View]
+    disabled: list[str]
+    axis_views: list[AxisView] | None
+
+
+def frame_images(source: Callable[[int], Sequence[np.ndarray]], cameras: Sequence[CameraLike],
+                 caps: Sequence[float], axis_scales: Sequence[float] | None, frame: int) -> FrameImages:
+    """Frame `frame`'s views from its silhouettes; medial axes only when `axis_scales` is given."""
+    masks = source(frame)
+    views, disabled = make_views(cameras, masks, caps)
+    axes = axis_views(cameras, masks, axis_scales) if axis_scales is not None else None
+    return FrameImages(views, disabled, axes)
+
+
+class FrameImagesAhead:
+    """Prepares frames 0 .. frame_count - 1 with `prepare(frame)`, one frame ahead of the one asked
+    (`prepare` None: a run without images, which asks for none).
+
+    Use as a context manager: leaving it (also by an exception or a signal) cancels the frame
+    prepared ahead and waits for one being prepared, at most one frame's work.
+    """
+
+    def __init__(self, prepare: Callable[[int], FrameImages] | None, frame_count: int) -> None:
+        self._prepare = prepare
+        self._frame_count = frame_count
+        self._executor: ThreadPoolExecutor | None = None
+        self._ahead: dict[int, Future[FrameImages]] = {}
+
+    def __enter__(self) -> FrameImagesAhead:
+        if self._prepare is not None:
+            self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="ibik-frame-images")
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
+                 traceback: TracebackType | None) -> None:
+        for future in self._ahead.values():
+            future.cancel()
+        self._ahead.clear()
+        if self._executor is not None:
+            self._executor.shutdown(wait=True)
+            self._executor = None
+
+    def get(self, frame: int) -> FrameImages:
+        """Frame `frame`'s images (prepared now if it was not ahead); starts preparing the next one."""
+        if self._executor is None or self._prepare is None:
+            raise RuntimeError("FrameImagesAhead.get outside its `with` block or without `prepare`")
+        future = self._ahead.pop(frame, None)
+        if future is None:
+            future = self._executor.submit(self._prepare, frame)
+        if frame + 1 < self._frame_count and frame + 1 not in self._ahead:
+            self._ahead[frame + 1] = self._executor.submit(self._prepare, frame + 1)
+        return future.result()

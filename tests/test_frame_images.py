@@ -1,0 +1,95 @@
+"""Tests of the frame images prepared one frame ahead: the same views as prepared in turn, frames
+read in order and once, errors raised at their frame, nothing left running after the loop."""
+
+import threading
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from ibik_pin.exceptions import InputError
+from ibik_pin.synthetic.silhouettes import render_silhouettes
+from ibik_pin.tracking.frame_images import FrameImagesAhead, frame_images
+from ibik_pin.vision.pinhole import look_at_camera
+from tests.conftest import random_human_configuration
+
+FRAMES = 5
+
+
+@pytest.fixture(scope="module")
+def rig(human):
+    """Two 160 x 120 cameras and FRAMES frames of silhouettes of a seeded moving pose; the third
+    frame's second view empty (the person left it)."""
+    rng = np.random.default_rng(7)
+    start = random_human_configuration(human, rng, spread=0.3)
+    end = random_human_configuration(human, rng, spread=0.3)
+    end[:7] = start[:7]
+    start[:3] = end[:3] = 0.0
+    up = np.array([0.0, 1.0, 0.0])
+    cameras = [look_at_camera(name, (160, 120), 150.0, eye, np.zeros(3), up)
+               for name, eye in (("front", np.array([4.0, 0.5, 0.0])), ("side", np.array([0.0, 0.5, 4.0])))]
+    masks = [render_silhouettes(human, pin.interpolate(human.model, start, end, t), cameras)
+             for t in np.linspace(0.0, 0.3, FRAMES)]
+    masks[2][1] = np.zeros_like(masks[2][1])
+    return cameras, masks
+
+
+class Source:
+    """A silhouette source that records which frames were read, and by which thread."""
+
+    def __init__(self, masks, failing_frame: int | None = None) -> None:
+        self.masks, self.failing_frame = masks, failing_frame
+        self.read: list[int] = []
+        self.threads: set[str] = set()
+
+    def __call__(self, frame: int):
+        self.read.append(frame)
+        self.threads.add(threading.current_thread().name)
+        if frame == self.failing_frame:
+            raise InputError(f"frame {frame}: the mask cannot be read")
+        return self.masks[frame]
+
+
+def prepare(source, cameras, frame):
+    return frame_images(source, cameras, [4.0, 4.0], [6.0, 6.0], frame)
+
+
+def test_frames_prepared_ahead_are_those_prepared_in_turn_read_in_order_and_once(rig):
+    cameras, masks = rig
+    ahead_source, turn_source = Source(masks), Source(masks)
+    with FrameImagesAhead(lambda frame: prepare(ahead_source, cameras, frame), FRAMES) as images:
+        prepared = [images.get(frame) for frame in range(FRAMES)]
+    for frame, ahead in enumerate(prepared):
+        in_turn = prepare(turn_source, cameras, frame)
+        assert ahead.disabled == in_turn.disabled == (["side"] if frame == 2 else [])
+        for view, reference in zip(ahead.views, in_turn.views, strict=True):
+            assert view.support.enabled == reference.support.enabled
+            np.testing.assert_array_equal(view.support.values, reference.support.values)
+        assert ahead.axis_views is not None and in_turn.axis_views is not None
+        for axis, reference in zip(ahead.axis_views, in_turn.axis_views, strict=True):
+            np.testing.assert_array_equal(axis.pixels, reference.pixels)
+    assert ahead_source.read == list(range(FRAMES))
+    assert ahead_source.threads and threading.current_thread().name not in ahead_source.threads
+
+
+def test_an_error_is_raised_at_its_frame_and_the_loop_leaves_nothing_running(rig):
+    cameras, masks = rig
+    source = Source(masks, failing_frame=2)
+    got = []
+
+    def track_frames():
+        with FrameImagesAhead(lambda frame: prepare(source, cameras, frame), FRAMES) as images:
+            for frame in range(FRAMES):
+                got.append(images.get(frame).disabled)
+
+    with pytest.raises(InputError, match="frame 2: the mask cannot be read"):
+        track_frames()
+    assert got == [[], []]  # frames 0 and 1 came through
+    assert source.read == [0, 1, 2, 3][:len(source.read)] and len(source.read) <= 4  # at most one ahead
+    assert not [thread for thread in threading.enumerate() if thread.name.startswith("ibik-frame-images")]
+
+
+def test_without_medial_axes_none_are_built(rig):
+    cameras, masks = rig
+    images = frame_images(Source(masks), cameras, [4.0, 4.0], None, 0)
+    assert images.axis_views is None and len(images.views) == 2
