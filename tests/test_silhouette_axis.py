@@ -5,12 +5,14 @@ import pytest
 
 from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError
+from ibik_pin.synthetic.silhouettes import render_silhouettes
 from ibik_pin.tasks import ImageTask, View
 from ibik_pin.tasks.silhouette_axis import (
     AxisView,
     SilhouetteAxisTask,
 )
 from ibik_pin.tasks.weighted_sum import WeightedSum
+from ibik_pin.vision.distance import distance_to_background
 from ibik_pin.vision.kernels import (
     axis_value_and_frame_gradient,
     axis_value_and_pixel_gradient,
@@ -49,6 +51,50 @@ def test_the_medial_axis_is_thinned_and_capped():
     dense = medial_axis_pixels(mask, spacing_px=1, max_points=10_000)
     sparse = medial_axis_pixels(mask, spacing_px=4, max_points=10_000)
     assert len(sparse) < len(dense) / 2
+
+
+def _reference_medial_axis(mask, min_depth_px, spacing_px, max_points):
+    """The medial axis in plain numpy, as medial_axis_pixels computed it before its compiled loop:
+    ridge tests on whole shifted arrays, then one pixel per block by a sort."""
+    inside = (mask != 0).astype(np.uint8)
+    rows, columns = np.nonzero(inside)
+    top, left = rows.min(), columns.min()
+    depth = distance_to_background(np.pad(inside[top:rows.max() + 1, left:columns.max() + 1], 1))
+    centre = depth[1:-1, 1:-1]
+    height, width = centre.shape
+    ridge = np.zeros(centre.shape, dtype=bool)
+    for row_step, column_step in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        before = depth[1 - row_step:1 - row_step + height, 1 - column_step:1 - column_step + width]
+        after = depth[1 + row_step:1 + row_step + height, 1 + column_step:1 + column_step + width]
+        ridge |= (centre >= before) & (centre > after)
+    ridge &= centre >= min_depth_px
+    rows, columns = np.nonzero(ridge)
+    depths = centre[rows, columns]
+    rows, columns = rows + top, columns + left
+    blocks = (rows // spacing_px) * ((mask.shape[1] + spacing_px - 1) // spacing_px) + columns // spacing_px
+    order = np.lexsort((-depths, blocks))
+    first = np.ones(order.size, dtype=bool)
+    first[1:] = blocks[order[1:]] != blocks[order[:-1]]
+    kept = order[first]
+    if kept.size > max_points:
+        kept = kept[np.linspace(0, kept.size - 1, max_points).round().astype(int)]
+    return np.column_stack((columns[kept], rows[kept])).astype(np.float64)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_compiled_medial_axis_equals_the_plain_one(human, seed):
+    """Silhouettes of seeded poses, one cut by the frame's edge, with speckle: the same pixels in
+    the same order for every spacing and cap."""
+    rng = np.random.default_rng(seed)
+    q = random_human_configuration(human, rng, spread=0.5)
+    q[:3] = 0.0
+    eye = np.array([3.0, 0.4, 1.0]) if seed != 3 else np.array([1.2, 0.4, 0.3])  # seed 3: close, cut by the edge
+    camera = look_at_camera("cam", (160, 120), 150.0, eye, np.zeros(3), np.array([0.0, 1.0, 0.0]))
+    mask = render_silhouettes(human, q, [camera])[0]
+    mask ^= rng.random(mask.shape) < 0.02  # speckle: holes inside, dots outside
+    for spacing, cap in ((1, 10_000), (3, 600), (3, 25), (4, 10_000)):
+        np.testing.assert_array_equal(medial_axis_pixels(mask, 1.5, spacing, cap),
+                                      _reference_medial_axis(mask, 1.5, spacing, cap))
 
 
 def _axis_views(human, q, scale_px=6.0):

@@ -20,7 +20,7 @@ from ibik_pin.exceptions import SolverError
 from ibik_pin.solvers import kernels
 from ibik_pin.solvers.kernels import RANK_TOLERANCE
 
-__all__ = ["RANK_TOLERANCE", "damped_solve", "damped_step", "remove_direction"]
+__all__ = ["RANK_TOLERANCE", "damped_solve", "damped_step", "range_basis", "remove_direction"]
 
 
 def damped_solve(projected: np.ndarray, residual: np.ndarray, damping: float) -> tuple[np.ndarray, np.ndarray]:
@@ -58,6 +58,19 @@ def damped_step(projected: np.ndarray, residual: np.ndarray, damping: float) -> 
         raise SolverError(f"the damped normal equations of a level's projected Jacobian {projected.shape} "
                           "are not positive definite (a non-finite matrix?)")
     return w
+
+
+def range_basis(matrix: np.ndarray) -> np.ndarray:
+    """Orthonormal basis (m, k) of the range of a matrix (m, n), its rank k counted as the levels'
+    factorisation counts it (the column-pivoted QR of damped_solve, here of the matrix's transpose).
+
+    Raises:
+        SolverError: the matrix could not be factored (non-finite).
+    """
+    basis, _, _, _, ok = kernels.factor(np.ascontiguousarray(np.transpose(matrix), dtype=np.float64), 1.0)
+    if not ok:
+        raise SolverError(f"the range of a {matrix.shape} matrix could not be factored (a non-finite matrix?)")
+    return basis
 
 
 def remove_direction(reduced: np.ndarray) -> np.ndarray:

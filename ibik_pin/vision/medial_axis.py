@@ -13,6 +13,7 @@ than ``min_depth_px`` are left out: there the ridge is made of the spurs a noisy
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from ibik_pin.exceptions import InputError
 from ibik_pin.vision.distance import box_around, distance_to_background
@@ -42,33 +43,58 @@ def medial_axis_pixels(
         raise InputError(f"mask: expected a 2D (H, W) image, found shape {mask.shape}")
     if int(spacing_px) < 1 or int(max_points) < 1:
         raise InputError(f"spacing_px and max_points must be >= 1, got {spacing_px} and {max_points}")
-    inside = (mask != 0).astype(np.uint8)
+    inside = (mask != 0).view(np.uint8)
     if not inside.any():
         return np.zeros((0, 2))
     # Only the silhouette's bounding box: outside it the depth is 0 and no pixel is on the ridge.
     box_rows, box_columns = box_around(inside)
     depth = distance_to_background(np.pad(inside[box_rows, box_columns], 1))
-    centre = depth[1:-1, 1:-1]
-    ridge = np.zeros(centre.shape, dtype=bool)
-    height, width = centre.shape
-    for row_step, column_step in _DIRECTIONS:
-        before = depth[1 - row_step:1 - row_step + height, 1 - column_step:1 - column_step + width]
-        after = depth[1 + row_step:1 + row_step + height, 1 + column_step:1 + column_step + width]
-        # >= on one side and > on the other: a ridge two pixels wide keeps one of them.
-        ridge |= (centre >= before) & (centre > after)
-    ridge &= centre >= min_depth_px
-    rows, columns = np.nonzero(ridge)
-    if rows.size == 0:
-        return np.zeros((0, 2))
-    depths = centre[rows, columns]
-    rows, columns = rows + box_rows.start, columns + box_columns.start  # image coordinates
     spacing = int(spacing_px)
-    # One pixel per block of the image's grid: the deepest, so the kept sample sits on the crest.
-    blocks = (rows // spacing) * ((inside.shape[1] + spacing - 1) // spacing) + columns // spacing
-    order = np.lexsort((-depths, blocks))
-    first = np.ones(order.size, dtype=bool)
-    first[1:] = blocks[order[1:]] != blocks[order[:-1]]
-    kept = order[first]
-    if kept.size > max_points:
-        kept = kept[np.linspace(0, kept.size - 1, int(max_points)).round().astype(int)]
-    return np.column_stack((columns[kept], rows[kept])).astype(np.float64)
+    columns, rows = _thinned_ridge(depth, float(min_depth_px), spacing, box_rows.start, box_columns.start)
+    if columns.size > max_points:
+        kept = np.linspace(0, columns.size - 1, int(max_points)).round().astype(np.int64)
+        columns, rows = columns[kept], rows[kept]
+    return np.column_stack((columns, rows)).astype(np.float64)
+
+
+@njit(cache=True, nogil=True)
+def _thinned_ridge(depth, min_depth, spacing, row0, column0):
+    """The ridge pixels of `depth` (the box's distances padded by a zero ring) at least `min_depth`
+    deep, one per spacing x spacing block of the image's grid: the deepest, the first in row-major
+    order among equals. Returns their image columns and rows, in the order of the blocks' indices
+    (row of blocks, then column)."""
+    height, width = depth.shape[0] - 2, depth.shape[1] - 2
+    first_block_row, first_block_column = row0 // spacing, column0 // spacing
+    block_rows = (row0 + height - 1) // spacing - first_block_row + 1
+    block_columns = (column0 + width - 1) // spacing - first_block_column + 1
+    best = np.full((block_rows, block_columns), -1.0)
+    where = np.zeros((block_rows, block_columns, 2), dtype=np.int64)
+    for i in range(1, height + 1):
+        for j in range(1, width + 1):
+            centre = depth[i, j]
+            if centre < min_depth:
+                continue
+            # >= on one side and > on the other: a ridge two pixels wide keeps one of them.
+            if not ((centre >= depth[i, j - 1] and centre > depth[i, j + 1])
+                    or (centre >= depth[i - 1, j] and centre > depth[i + 1, j])
+                    or (centre >= depth[i - 1, j - 1] and centre > depth[i + 1, j + 1])
+                    or (centre >= depth[i - 1, j + 1] and centre > depth[i + 1, j - 1])):
+                continue
+            row, column = row0 + i - 1, column0 + j - 1
+            block_row, block_column = row // spacing - first_block_row, column // spacing - first_block_column
+            if centre > best[block_row, block_column]:
+                best[block_row, block_column] = centre
+                where[block_row, block_column, 0] = column
+                where[block_row, block_column, 1] = row
+    count = 0
+    for block_row in range(block_rows):
+        for block_column in range(block_columns):
+            count += best[block_row, block_column] >= 0.0
+    columns, rows = np.empty(count, dtype=np.int64), np.empty(count, dtype=np.int64)
+    k = 0
+    for block_row in range(block_rows):
+        for block_column in range(block_columns):
+            if best[block_row, block_column] >= 0.0:
+                columns[k], rows[k] = where[block_row, block_column, 0], where[block_row, block_column, 1]
+                k += 1
+    return columns, rows
