@@ -36,7 +36,8 @@ def signed_distance(mask: np.ndarray, region: tuple[slice, slice] | None = None,
     values = distance_to_background(1 - mask[region].view(np.uint8))
     np.subtract(np.float32(0.5), values, out=values)  # outside: 0.5 - distance
     box_in_region = shifted(box, region)
-    values[box_in_region] = np.where(mask[box], inside - np.float32(0.5), values[box_in_region])
+    # copyto, not where: numpy's where on these strided views is ten times slower.
+    np.copyto(values[box_in_region], inside - np.float32(0.5), where=mask[box])
     return values
 
 
