@@ -10,7 +10,9 @@ import pytest
 from ibik_pin.exceptions import InputError
 from ibik_pin.synthetic.silhouettes import render_silhouettes
 from ibik_pin.tracking.frame_images import FrameImagesAhead, frame_images
+from ibik_pin.vision.medial_axis import medial_axis_pixels
 from ibik_pin.vision.pinhole import look_at_camera
+from ibik_pin.vision.support import support_from_mask
 from tests.conftest import random_human_configuration
 
 FRAMES = 5
@@ -87,6 +89,21 @@ def test_an_error_is_raised_at_its_frame_and_the_loop_leaves_nothing_running(rig
     assert got == [[], []]  # frames 0 and 1 came through
     assert source.read == [0, 1, 2, 3][:len(source.read)] and len(source.read) <= 4  # at most one ahead
     assert not [thread for thread in threading.enumerate() if thread.name.startswith("ibik-frame-images")]
+
+
+def test_the_shared_distance_transform_gives_the_support_and_medial_axis_computed_alone(human, rig):
+    """frame_images computes a silhouette's inside distance once for both; also for a silhouette
+    cut by the frame's edge, where the medial axis computes its own (it takes the edge for a border)."""
+    cameras, masks = rig
+    close = look_at_camera("close", (160, 120), 150.0, np.array([1.2, 0.4, 0.3]), np.zeros(3),
+                           np.array([0.0, 1.0, 0.0]))
+    cut = render_silhouettes(human, pin.neutral(human.model), [close])[0]
+    assert cut[0].any() or cut[-1].any() or cut[:, 0].any() or cut[:, -1].any()
+    for camera, mask in ((cameras[0], masks[0][0]), (cameras[1], masks[4][1]), (close, cut)):
+        images = frame_images(lambda frame, mask=mask: [mask], [camera], [4.0], [6.0], 0)
+        np.testing.assert_array_equal(images.views[0].support.values, support_from_mask(mask, 4.0).values)
+        assert images.axis_views is not None
+        np.testing.assert_array_equal(images.axis_views[0].pixels, medial_axis_pixels(mask))
 
 
 def test_without_medial_axes_none_are_built(rig):

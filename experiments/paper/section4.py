@@ -18,6 +18,7 @@ the estimated internal joint to the true one.
 
 from __future__ import annotations
 
+import functools
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -45,8 +46,9 @@ from ibik_pin.synthetic.rig import humaneva_rig
 from ibik_pin.synthetic.silhouettes import render_limb_masks, render_silhouettes
 from ibik_pin.tasks import FramePositionTask, ImageTask
 from ibik_pin.tracking.first_frame import solve_first_frame
+from ibik_pin.tracking.frame_images import FrameImagesAhead, frame_images
 from ibik_pin.tracking.tracker import Tracker, TrackingSettings
-from ibik_pin.tracking.views import make_views, support_caps
+from ibik_pin.tracking.views import support_caps
 from ibik_pin.vision.segmentation import TemporalMajority
 
 # Moderate segmentation defects at HumanEva's 640 x 480: a mask 1 px tight or 2 px loose, a small
@@ -250,28 +252,31 @@ def run_chain(
     targets = clip.keypoint(chain.end) + rng.normal(0.0, target_noise_mm / 1000.0, (len(clip.q), 3))
     end_task = FramePositionTask(model, body.keypoints["Wrist" if chain.name == "arm" else "Ankle"])
     levels: list[list] = [[end_task]]
-    image_task = None
+    image_task, prepare = None, None
     if method == "ibik":
         image_task = ImageTask(body, (), samples_per_segment=8, max_step_size=image_step)
         levels.append([image_task])
         caps = support_caps(views.cameras, clip.keypoint("Hip")[0])
+        # As `ibik track`: each frame's support images built one frame ahead, in a second thread.
+        prepare = functools.partial(frame_images, views.masks.__getitem__, views.cameras, caps, None)
     chain_ids = body.frame_ids(list(body.keypoints))  # base, internal joint, end effector
     placements = _base_placements(chain, clip)
     configuration = Configuration(model)
     positions = np.empty((len(clip.q), 3, 3))
-    for frame in range(len(clip.q)):
-        model.jointPlacements[1] = placements[frame]
-        configuration.update()
-        end_task.set_target(targets[frame])
-        if image_task is not None:
-            with warnings.catch_warnings():  # an empty view is simply skipped
-                warnings.simplefilter("ignore", EmptySilhouetteWarning)
-                image_task.set_views(make_views(views.cameras, views.masks[frame], caps)[0])
-        if frame == 0:  # as `ibik track` does
-            solve_first_frame(solver, configuration, levels, image_task, iterations=100, starts=8)
-        else:
-            solver.solve(configuration, levels, iterations=iterations)
-        positions[frame] = configuration.frame_positions(chain_ids)
+    with FrameImagesAhead(prepare, len(clip.q)) as images:
+        for frame in range(len(clip.q)):
+            model.jointPlacements[1] = placements[frame]
+            configuration.update()
+            end_task.set_target(targets[frame])
+            if image_task is not None:
+                with warnings.catch_warnings():  # an empty view is simply skipped
+                    warnings.simplefilter("ignore", EmptySilhouetteWarning)
+                    image_task.set_views(images.get(frame).views)
+            if frame == 0:  # as `ibik track` does
+                solve_first_frame(solver, configuration, levels, image_task, iterations=100, starts=8)
+            else:
+                solver.solve(configuration, levels, iterations=iterations)
+            positions[frame] = configuration.frame_positions(chain_ids)
     errors = np.linalg.norm(positions[:, 1] - clip.keypoint(chain.internal), axis=1)
     return Run([chain.internal], errors[:, None], positions)
 

@@ -19,10 +19,14 @@ from types import TracebackType
 
 import numpy as np
 
+from ibik_pin.checks import as_mask
+from ibik_pin.exceptions import InputError
 from ibik_pin.tasks import View
 from ibik_pin.tasks.silhouette_axis import AxisView
-from ibik_pin.tracking.views import axis_views, make_views
 from ibik_pin.vision.camera import CameraLike
+from ibik_pin.vision.distance import inside_distance
+from ibik_pin.vision.medial_axis import medial_axis_pixels
+from ibik_pin.vision.support import SupportImage, support_from_mask
 
 __all__ = ["FrameImages", "FrameImagesAhead", "frame_images"]
 
@@ -43,11 +47,32 @@ class FrameImages:
 
 def frame_images(source: Callable[[int], Sequence[np.ndarray]], cameras: Sequence[CameraLike],
                  caps: Sequence[float], axis_scales: Sequence[float] | None, frame: int) -> FrameImages:
-    """Frame `frame`'s views from its silhouettes; medial axes only when `axis_scales` is given."""
+    """Frame `frame`'s views from its silhouettes: per camera, the overlap criterion's support (its
+    inside cap from `caps` [px]) and, when `axis_scales` is given, the medial axis of the
+    silhouette-axis term (its robust scale [px]); both read one distance transform of the silhouette.
+
+    An empty silhouette gives a disabled view and an empty axis, reported in `disabled` rather than
+    warned of (catch_warnings, which would silence support_from_mask's warning, is not thread-safe).
+    """
     masks = source(frame)
-    views, disabled = make_views(cameras, masks, caps)
-    axes = axis_views(cameras, masks, axis_scales) if axis_scales is not None else None
-    return FrameImages(views, disabled, axes)
+    if len(masks) != len(cameras):
+        raise InputError(f"expected one silhouette per camera ({len(cameras)}), got {len(masks)}")
+    views, axes, disabled = [], [], []
+    for index, (camera, mask) in enumerate(zip(cameras, masks, strict=True)):
+        mask = as_mask(mask)
+        if not mask.any():
+            disabled.append(camera.name)
+            views.append(View(camera, SupportImage(np.zeros(mask.shape, np.float32), enabled=False)))
+            axes.append(np.zeros((0, 2)))
+            continue
+        inside = inside_distance(mask)
+        views.append(View(camera, support_from_mask(mask, inside_cap_px=caps[index], inside=inside)))
+        if axis_scales is not None:
+            axes.append(medial_axis_pixels(mask, inside=inside))
+    axis_views = (None if axis_scales is None else
+                  [AxisView(camera, pixels, scale) for camera, pixels, scale in zip(cameras, axes, axis_scales,
+                                                                                     strict=True)])
+    return FrameImages(views, disabled, axis_views)
 
 
 class FrameImagesAhead:

@@ -1,9 +1,8 @@
-"""The tracker's per-frame inputs: the starting pose, and the views built from each frame's silhouettes.
+"""The tracker's starting pose and the sizes its views are built with.
 
 `initial_configuration` places the neutral pose on the first frame's targets; `support_caps` gives
-each view's support cap (a limb's half width seen at the subject's distance); `make_views` and
-`axis_views` turn one frame's silhouettes into the views of the overlap criterion
-(:mod:`ibik_pin.tasks.image`) and of the silhouette-axis term (:mod:`ibik_pin.tasks.silhouette_axis`).
+each view's support cap (a limb's half width seen at the subject's distance). Each frame's views are
+built from its silhouettes by :mod:`ibik_pin.tracking.frame_images`.
 """
 
 from __future__ import annotations
@@ -13,16 +12,10 @@ from collections.abc import Sequence
 import numpy as np
 import pinocchio as pin
 
-from ibik_pin.checks import as_mask
-from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
-from ibik_pin.tasks import View
-from ibik_pin.tasks.silhouette_axis import AxisView
 from ibik_pin.vision.camera import CameraLike
-from ibik_pin.vision.medial_axis import medial_axis_pixels
-from ibik_pin.vision.support import SupportImage, support_from_mask
 
-__all__ = ["LIMB_HALF_WIDTH", "initial_configuration", "support_caps", "make_views", "axis_views"]
+__all__ = ["LIMB_HALF_WIDTH", "initial_configuration", "support_caps"]
 
 LIMB_HALF_WIDTH = 0.04  # [m] the support's inside cap, in pixels at the subject's distance (docs/method.md)
 
@@ -62,31 +55,3 @@ def support_caps(
         radius = camera.pixel_radius(subject_position[None], np.array([size]))
         caps.append(float(max(radius[0], 1.0)))
     return caps
-
-
-def make_views(
-    cameras: Sequence[CameraLike], masks: Sequence[np.ndarray], caps: Sequence[float]
-) -> tuple[list[View], list[str]]:
-    """One view per camera from its silhouette; also the names of the cameras whose mask is empty.
-
-    Args:
-        masks: (H, W) bool silhouette per camera; caps: the support's inside cap per camera [px].
-    """
-    if len(masks) != len(cameras):
-        raise InputError(f"expected one silhouette per camera ({len(cameras)}), got {len(masks)}")
-    views, disabled = [], []
-    for camera, mask, cap in zip(cameras, masks, caps, strict=True):
-        # An empty silhouette is reported per frame, not warned of: and catch_warnings, which would
-        # silence support_from_mask's warning, is not thread-safe (frame_images runs this in a thread).
-        if not as_mask(mask).any():
-            disabled.append(camera.name)
-            views.append(View(camera, SupportImage(np.zeros(mask.shape, np.float32), enabled=False)))
-        else:
-            views.append(View(camera, support_from_mask(mask, inside_cap_px=cap)))
-    return views, disabled
-
-
-def axis_views(cameras: Sequence[CameraLike], masks: Sequence[np.ndarray], scales: Sequence[float]) -> list[AxisView]:
-    """One silhouette-axis view per camera: the medial axis of its mask, robust scale [px]."""
-    return [AxisView(camera, medial_axis_pixels(mask), scale)
-            for camera, mask, scale in zip(cameras, masks, scales, strict=True)]

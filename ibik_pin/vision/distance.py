@@ -7,19 +7,43 @@ boxes around the silhouette, which give the whole frame's values there.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import cv2
 import numpy as np
 
 from ibik_pin.exceptions import InputError
 
-__all__ = ["box_around", "distance_to_background", "grown", "shifted", "signed_distance"]
+__all__ = ["InsideDistance", "box_around", "distance_to_background", "grown", "inside_distance", "shifted",
+           "signed_distance"]
+
+
+class InsideDistance(NamedTuple):
+    """A silhouette's distance to the background on its bounding box grown by one pixel.
+
+    Attributes:
+        values: (h, w) float32 distance [px] of each pixel of `box` to the nearest unset pixel.
+        box: (rows, columns) the silhouette's bounding box grown by one pixel, clipped to the frame.
+    """
+
+    values: np.ndarray
+    box: tuple[slice, slice]
+
+
+def inside_distance(mask: np.ndarray, box: tuple[slice, slice] | None = None) -> InsideDistance:
+    """The distance to the background of a non-empty (H, W) bool mask on its bounding box grown by
+    one pixel (`box`: that bounding box if known, box_around(mask)); what both the support image
+    and the medial axis read, computed once for them."""
+    grown_box = grown(box_around(mask) if box is None else box, 1, mask.shape)
+    return InsideDistance(distance_to_background(mask[grown_box].view(np.uint8)), grown_box)
 
 
 def signed_distance(mask: np.ndarray, region: tuple[slice, slice] | None = None,
-                    box: tuple[slice, slice] | None = None) -> np.ndarray:
+                    box: tuple[slice, slice] | None = None, inside: InsideDistance | None = None) -> np.ndarray:
     """(h, w) float32 signed Euclidean distance [px] to the mask's border, positive inside, on
     `region` of the frame: a box that holds the silhouette's bounding box grown by one pixel (None:
-    the whole frame). `box`: that bounding box if known (box_around(mask)).
+    the whole frame). `box`: that bounding box if known (box_around(mask)); `inside`: the mask's
+    inside_distance if known.
 
     The border is taken halfway between a set and an unset pixel, hence the 0.5 shifts: the
     distance then grows by 1 px per pixel across the border as well. The image edge is no
@@ -31,13 +55,14 @@ def signed_distance(mask: np.ndarray, region: tuple[slice, slice] | None = None,
     # values: every pixel of that ring is background, so no nearer border lies beyond it), which on
     # a person in a 640 x 480 frame is a tenth of the pixels. The outside distance on the region is
     # the whole frame's there too: every set pixel, so the nearest, lies within the region.
-    box = grown(box_around(mask) if box is None else box, 1, mask.shape)
-    inside = distance_to_background(mask[box].view(np.uint8))
+    if inside is None:
+        inside = inside_distance(mask, box)
+    box = inside.box
     values = distance_to_background(1 - mask[region].view(np.uint8))
     np.subtract(np.float32(0.5), values, out=values)  # outside: 0.5 - distance
     box_in_region = shifted(box, region)
     # copyto, not where: numpy's where on these strided views is ten times slower.
-    np.copyto(values[box_in_region], inside - np.float32(0.5), where=mask[box])
+    np.copyto(values[box_in_region], inside.values - np.float32(0.5), where=mask[box])
     return values
 
 

@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 
 from ibik_pin.exceptions import InputError
-from ibik_pin.vision.distance import box_around, distance_to_background
+from ibik_pin.vision.distance import InsideDistance, box_around, distance_to_background
 
 __all__ = ["medial_axis_pixels"]
 
@@ -25,7 +25,8 @@ _DIRECTIONS = ((0, 1), (1, 0), (1, 1), (1, -1))
 
 
 def medial_axis_pixels(
-    mask: np.ndarray, min_depth_px: float = 1.5, spacing_px: int = 3, max_points: int = 600
+    mask: np.ndarray, min_depth_px: float = 1.5, spacing_px: int = 3, max_points: int = 600,
+    inside: InsideDistance | None = None,
 ) -> np.ndarray:
     """Ridge pixels of a silhouette's distance transform, thinned to about one per ``spacing_px``.
 
@@ -34,6 +35,9 @@ def medial_axis_pixels(
         min_depth_px: keep ridge pixels at least this far inside the silhouette [px].
         spacing_px: keep at most one ridge pixel per block of spacing_px x spacing_px pixels.
         max_points: at most this many pixels, taken evenly along the found ones.
+        inside: the mask's vision.distance.inside_distance if known (the support image's): used
+            when its box is not cut by the frame's edge, where the medial axis takes the frame's
+            edge for a border and the support does not.
 
     Returns:
         (N, 2) pixel coordinates (u, v) = (column, row) [px], N possibly 0.
@@ -43,12 +47,16 @@ def medial_axis_pixels(
         raise InputError(f"mask: expected a 2D (H, W) image, found shape {mask.shape}")
     if int(spacing_px) < 1 or int(max_points) < 1:
         raise InputError(f"spacing_px and max_points must be >= 1, got {spacing_px} and {max_points}")
-    inside = (mask != 0).view(np.uint8)
-    if not inside.any():
+    person = (mask != 0).view(np.uint8)
+    if not person.any():
         return np.zeros((0, 2))
     # Only the silhouette's bounding box: outside it the depth is 0 and no pixel is on the ridge.
-    box_rows, box_columns = box_around(inside)
-    depth = distance_to_background(np.pad(inside[box_rows, box_columns], 1))
+    box_rows, box_columns = box_around(person)
+    padded = (slice(box_rows.start - 1, box_rows.stop + 1), slice(box_columns.start - 1, box_columns.stop + 1))
+    if inside is not None and inside.box == padded:  # the same pixels: the box and its ring of background
+        depth = inside.values
+    else:
+        depth = distance_to_background(np.pad(person[box_rows, box_columns], 1))
     spacing = int(spacing_px)
     columns, rows = _thinned_ridge(depth, float(min_depth_px), spacing, box_rows.start, box_columns.start)
     if columns.size > max_points:

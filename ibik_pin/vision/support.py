@@ -21,7 +21,7 @@ import numpy as np
 
 from ibik_pin.checks import as_mask
 from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
-from ibik_pin.vision.distance import box_around, shifted, signed_distance
+from ibik_pin.vision.distance import InsideDistance, box_around, inside_distance, shifted, signed_distance
 from ibik_pin.vision.kernels import support_sample
 
 
@@ -207,6 +207,7 @@ def support_from_mask(
     inside_cap_px: float | None = 6.0,
     outside_cap_px: float | None = None,
     smooth_sigma_px: float = 1.0,
+    inside: InsideDistance | None = None,
 ) -> SupportImage:
     """The signed-distance support of a silhouette.
 
@@ -220,6 +221,7 @@ def support_from_mask(
         inside_cap_px: cap of the inside distance [px]; None for no cap.
         outside_cap_px: truncation of the outside distance [px]; None for none.
         smooth_sigma_px: standard deviation of the Gaussian blur [px]; 0 for none.
+        inside: the mask's vision.distance.inside_distance if known (shared with the medial axis).
 
     Returns:
         The support [px]. An empty mask gives zeros with ``enabled=False`` and an
@@ -247,7 +249,9 @@ def support_from_mask(
         inside_value = inside_cap_px if inside_cap_px is not None else float(max(mask.shape))
         return SupportImage(np.full(mask.shape, inside_value, np.float32))
     box = box_around(mask)
-    support_values = functools.partial(_support_values, mask, box=box, inside_cap_px=inside_cap_px,
+    if inside is None:
+        inside = inside_distance(mask, box)
+    support_values = functools.partial(_support_values, mask, box=box, inside=inside, inside_cap_px=inside_cap_px,
                                        outside_cap_px=outside_cap_px, smooth_sigma_px=smooth_sigma_px)
     window = _window_around(box, mask.shape, smooth_sigma_px)
     if window is None:
@@ -259,9 +263,10 @@ def support_from_mask(
 
 
 def _support_values(mask: np.ndarray, region: tuple[slice, slice] | None, box: tuple[slice, slice],
-                    inside_cap_px: float | None, outside_cap_px: float | None, smooth_sigma_px: float) -> np.ndarray:
+                    inside: InsideDistance, inside_cap_px: float | None, outside_cap_px: float | None,
+                    smooth_sigma_px: float) -> np.ndarray:
     """support_from_mask's values on a region holding the silhouette's box (None: the whole frame), (h, w)."""
-    values = signed_distance(mask, region, box)
+    values = signed_distance(mask, region, box, inside)
     if region is None:
         region = (slice(0, mask.shape[0]), slice(0, mask.shape[1]))
     if inside_cap_px is not None:
