@@ -239,13 +239,27 @@ def main(argv: list[str] | None = None) -> int:
         message = " ".join(str(error).split())  # one line, whatever the message held
         print(f"ibik: error: {message}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("ibik: interrupted", file=sys.stderr)
-        return 130
-    except Terminated:
-        print("ibik: terminated", file=sys.stderr)
-        return 143
+    except (KeyboardInterrupt, Terminated, SystemError) as error:
+        # A signal handled inside a library's callback (Numba loading a cached function) reaches
+        # here as the cause of the SystemError the library raises instead.
+        signalled = _signal_behind(error)
+        if signalled is None:
+            raise
+        print(f"ibik: {'interrupted' if isinstance(signalled, KeyboardInterrupt) else 'terminated'}", file=sys.stderr)
+        return 130 if isinstance(signalled, KeyboardInterrupt) else 143
     return 0
+
+
+def _signal_behind(error: BaseException) -> BaseException | None:
+    """The KeyboardInterrupt or Terminated that `error` is or was raised from, if any."""
+    seen: set[int] = set()
+    current: BaseException | None = error
+    while current is not None and id(current) not in seen:
+        if isinstance(current, (KeyboardInterrupt, Terminated)):
+            return current
+        seen.add(id(current))
+        current = current.__cause__ or current.__context__
+    return None
 
 
 if __name__ == "__main__":

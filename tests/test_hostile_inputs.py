@@ -27,7 +27,7 @@ import cv2
 import numpy as np
 import pytest
 
-from ibik_pin.cli import main
+from ibik_pin.cli import Terminated, main
 from ibik_pin.demo import prepare_demo_inputs
 from ibik_pin.exceptions import FileFormatError, IbikError, IbikWarning, InputError
 from ibik_pin.io.calibration import read_calibration, write_calibration
@@ -517,3 +517,30 @@ def test_the_api_refuses_the_same_faults_with_ibik_errors(case, change, call, ex
 def test_the_api_takes_str_paths(case):
     job = _job(case)
     assert all(isinstance(path, Path) for path in (job.targets, job.out, job.calibration, job.masks))
+
+
+@pytest.mark.parametrize(("signalled", "code", "said"), [(Terminated, 143, "ibik: terminated"),
+                                                         (KeyboardInterrupt, 130, "ibik: interrupted")])
+def test_a_signal_handled_inside_a_library_callback_still_ends_the_run_as_that_signal(
+        case, monkeypatch, capsys, signalled, code, said):
+    """SIGTERM or Ctrl-C arriving while Numba loads a cached function: the handler's exception is
+    raised inside Numba's callback, which raises a SystemError from it (seen once in a full run of
+    the suite: exit 1 and a traceback instead of 143)."""
+    def wrapped_by_the_library(job):
+        try:
+            raise signalled()
+        except BaseException as error:
+            raise SystemError("<function _numba_unpickle> returned a result with an exception set") from error
+
+    monkeypatch.setattr("ibik_pin.tracking.pipeline.run_track", wrapped_by_the_library)
+    assert main(case.arguments()) == code
+    assert capsys.readouterr().err.strip().splitlines()[-1] == said
+
+
+def test_a_system_error_without_a_signal_behind_it_is_not_taken_for_one(case, monkeypatch):
+    def failing(job):
+        raise SystemError("a library's own failure")
+
+    monkeypatch.setattr("ibik_pin.tracking.pipeline.run_track", failing)
+    with pytest.raises(SystemError, match="a library's own failure"):
+        main(case.arguments())
