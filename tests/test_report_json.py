@@ -10,7 +10,8 @@ import pytest
 from ibik_pin.tracking.axes import AxesChoice, AxesScore
 from ibik_pin.tracking.outcomes import LevelOutcome
 from ibik_pin.tracking.report import ResidualStats, TrackingReport
-from ibik_pin.tracking.tracker import TrackingResult, TrackingSettings
+from ibik_pin.tracking.result import TrackingResult
+from ibik_pin.tracking.tracker import TrackingSettings
 
 
 def refuse_constant(token):
