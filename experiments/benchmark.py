@@ -8,7 +8,9 @@ Measures in one run:
   real motion (CMU boxing, the real-mocap benchmark's inputs: silhouettes of another body, 640 x 480),
   2 and 4 views, liegeois, stack and qp: report.json's frames/s (the whole frame loop: silhouettes
   read, support images built, solves) and its frames/s of the solves alone, and the median time of one solver
-  step with the image term and of one without (timed around HierarchicalQPSolver.compute_step);
+  step with the image term and of one without (timed around HierarchicalQPSolver.compute_step, in a run
+  on one thread: --no-read-ahead, so that no support image is built beside the step, as none is beside
+  Pink's);
 - Pink (`pip install -e '.[bench]'`; skipped without it): one IK step toward the same targets from
   the same configurations (each frame's targets from the previous frame's solution), DAQP and
   ProxQP, position tasks on the same keypoint frames, a posture task, limits in Pink's QP; our timed
@@ -153,8 +155,8 @@ def step_rounds(inputs, run_folder: Path, frames: int, rounds: int) -> tuple[dic
     ours_rounds, pink_rounds = [], []
     for round_index in range(rounds):
         steps = StepTimer()
-        with steps.active():
-            run_variant(inputs, variant("ibik2v"), "clean", {"method": "qp"},
+        with steps.active():  # on one thread, as Pink's steps are timed: no support images built beside
+            run_variant(inputs, variant("ibik2v"), "clean", {"method": "qp", "read_ahead": False},
                         out=run_folder.parent / f"qp_2v_timed_{round_index}")
         ours_rounds.append({"step_with_image_us": steps.median_us(steps.image),
                             "step_without_image_us": steps.median_us(steps.blind),

@@ -94,6 +94,10 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--stack", type=Path, metavar="STACK.toml",
                         help="priority levels and their tasks (default: the package's default_stack.toml; "
                              "see the README, Priority stacks)")
+    parser.add_argument("--read-ahead", action=argparse.BooleanOptionalAction, default=True,
+                        help="read the next frame's silhouettes and build its support images in a second "
+                             "thread while a frame is solved (default: on; --no-read-ahead keeps the run on "
+                             "one core; ibik batch turns it off, its workers having a core each)")
     parser.add_argument("--overlay", action="store_true",
                         help="also write overlay videos, a residual plot and an HTML 3D replay")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -119,7 +123,7 @@ def _job(arguments: argparse.Namespace) -> TrackJob:
                                   step_tolerance=arguments.step_tolerance,
                                   use_image=not arguments.no_image, mask_filter_radius=arguments.mask_filter,
                                   criterion=arguments.criterion, swivel_search=arguments.swivel_search,
-                                  image_moves=arguments.image_moves,
+                                  image_moves=arguments.image_moves, read_ahead=arguments.read_ahead,
                                   stack=Stack.from_toml(arguments.stack) if arguments.stack else None),
         overlay=arguments.overlay,
         quiet=arguments.quiet,

@@ -56,10 +56,11 @@ def prepare(source, cameras, frame):
     return frame_images(source, cameras, [4.0, 4.0], [6.0, 6.0], frame)
 
 
-def test_frames_prepared_ahead_are_those_prepared_in_turn_read_in_order_and_once(rig):
+@pytest.mark.parametrize("threaded", [True, False])
+def test_frames_prepared_ahead_are_those_prepared_in_turn_read_in_order_and_once(rig, threaded):
     cameras, masks = rig
     ahead_source, turn_source = Source(masks), Source(masks)
-    with FrameImagesAhead(lambda frame: prepare(ahead_source, cameras, frame), FRAMES) as images:
+    with FrameImagesAhead(lambda frame: prepare(ahead_source, cameras, frame), FRAMES, threaded) as images:
         prepared = [images.get(frame) for frame in range(FRAMES)]
     for frame, ahead in enumerate(prepared):
         in_turn = prepare(turn_source, cameras, frame)
@@ -71,7 +72,7 @@ def test_frames_prepared_ahead_are_those_prepared_in_turn_read_in_order_and_once
         for axis, reference in zip(ahead.axis_views, in_turn.axis_views, strict=True):
             np.testing.assert_array_equal(axis.pixels, reference.pixels)
     assert ahead_source.read == list(range(FRAMES))
-    assert ahead_source.threads and threading.current_thread().name not in ahead_source.threads
+    assert (threading.current_thread().name in ahead_source.threads) != threaded
 
 
 def test_an_error_is_raised_at_its_frame_and_the_loop_leaves_nothing_running(rig):

@@ -77,20 +77,24 @@ def frame_images(source: Callable[[int], Sequence[np.ndarray]], cameras: Sequenc
 
 class FrameImagesAhead:
     """Prepares frames 0 .. frame_count - 1 with `prepare(frame)`, one frame ahead of the one asked
-    (`prepare` None: a run without images, which asks for none).
+    (`prepare` None: a run without images, which asks for none; `threaded` False: each frame when
+    asked, in the caller's thread).
 
     Use as a context manager: leaving it (also by an exception or a signal) cancels the frame
     prepared ahead and waits for one being prepared, at most one frame's work.
     """
 
-    def __init__(self, prepare: Callable[[int], FrameImages] | None, frame_count: int) -> None:
+    def __init__(self, prepare: Callable[[int], FrameImages] | None, frame_count: int, threaded: bool = True) -> None:
         self._prepare = prepare
         self._frame_count = frame_count
+        self._threaded = threaded
+        self._entered = False
         self._executor: ThreadPoolExecutor | None = None
         self._ahead: dict[int, Future[FrameImages]] = {}
 
     def __enter__(self) -> FrameImagesAhead:
-        if self._prepare is not None:
+        self._entered = True
+        if self._prepare is not None and self._threaded:
             self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="ibik-frame-images")
         return self
 
@@ -99,14 +103,17 @@ class FrameImagesAhead:
         for future in self._ahead.values():
             future.cancel()
         self._ahead.clear()
+        self._entered = False
         if self._executor is not None:
             self._executor.shutdown(wait=True)
             self._executor = None
 
     def get(self, frame: int) -> FrameImages:
         """Frame `frame`'s images (prepared now if it was not ahead); starts preparing the next one."""
-        if self._executor is None or self._prepare is None:
+        if not self._entered or self._prepare is None:
             raise RuntimeError("FrameImagesAhead.get outside its `with` block or without `prepare`")
+        if self._executor is None:
+            return self._prepare(frame)
         future = self._ahead.pop(frame, None)
         if future is None:
             future = self._executor.submit(self._prepare, frame)

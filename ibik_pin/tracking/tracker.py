@@ -92,6 +92,9 @@ class TrackingSettings:
         stack: the priority levels and their tasks (tracking.stack); None: Stack.default(). An
             image task's criterion, step and views, when the stack gives them, replace
             `criterion`, `image_step` and the cameras; a posture task's weight `posture_weight`.
+        read_ahead: read each frame's silhouettes and build its support images in a second thread
+            while the frame before is solved (tracking.frame_images); False keeps the run on one
+            thread (ibik batch's workers, one per core). The results are the same.
     """
 
     method: str = "qp"
@@ -112,6 +115,7 @@ class TrackingSettings:
     target_iterations: int = 5
     step_tolerance: float | None = None
     stack: Stack | None = None
+    read_ahead: bool = True
 
 
 class Tracker:
@@ -289,7 +293,7 @@ class Tracker:
         prepare = None if source is None else functools.partial(
             frame_images, source, self.cameras, caps, axis_scales if self.settings.criterion == "two-way" else None)
         loop_started = time.perf_counter()
-        with FrameImagesAhead(prepare, frame_count) as images:
+        with FrameImagesAhead(prepare, frame_count, threaded=self.settings.read_ahead) as images:
             for frame in range(frame_count):
                 present = np.all(np.isfinite(targets[frame]), axis=1)
                 for k, name in enumerate(names):
