@@ -16,7 +16,8 @@ Measures in one run:
   ProxQP, position tasks on the same keypoint frames, a posture task, limits in Pink's QP; our timed
   run and Pink's steps alternate over --rounds rounds, and each ratio is the median of the rounds'
   (the machine's speed drifts between runs);
-- the time split of the qp run with 2 views by part (cProfile's own times grouped by function), and
+- the time split of the qp run with 2 views on one thread by part (cProfile's own times grouped by
+  function), and
   the process's peak memory.
 
 A benchmark, not a test: absolute times on a shared 2-core machine are indicative, ratios less so.
@@ -137,9 +138,11 @@ def whole_body(frames: int, cache: Path) -> tuple[dict, dict, cProfile.Profile]:
                                                  "wall_s": run.wall_seconds,
                                                  "mean_iterations_per_frame": _mean_iterations(folder)}
     # Once more profiled, apart from the timed steps (step_rounds): the profiler's cost per call,
-    # several times a small numpy call's, would weigh on our steps and not on Pink's.
+    # several times a small numpy call's, would weigh on our steps and not on Pink's. On one thread:
+    # cProfile sees the calling thread only, and the support images would be built in another.
     profile.enable()
-    run_variant(inputs, variant("ibik2v"), "clean", {"method": "qp"}, out=out / "qp_2v_profiled")
+    run_variant(inputs, variant("ibik2v"), "clean", {"method": "qp", "read_ahead": False},
+                out=out / "qp_2v_profiled")
     profile.disable()
     blind = run_variant(inputs, variant("pik"), "clean", out=out / "pik")
     results["pik"] = {"fps": blind.loop_fps, "solve_fps": blind.solve_fps, "judged_error_mm": blind.judged_mm}
@@ -268,7 +271,8 @@ def main() -> None:
               f"| ours, qp, without the image | {ours['step_without_image_us']:.0f} |"]
     lines += [f"| Pink + {backend} | {values['step_us']:.0f} |" for backend, values in pink_results.items()
               if isinstance(values, dict)]
-    lines += ["", "| part of the profiled qp run, 2 views (own time; numpy's small-array calls in \"other\") | [s] |",
+    lines += ["", "| part of the profiled qp run, 2 views, one thread (own time; numpy's small-array calls in "
+              "\"other\") | [s] |",
               "| --- | ---: |"]
     lines += [f"| {part} | {seconds:.2f} |" for part, seconds in figures["split_qp_2_views_s"].items()]
     lines += ["", f"ratios (median of {arguments.rounds} rounds): "
