@@ -304,13 +304,13 @@ def markdown(results: typing.Sequence[RunResult], summary: dict, header: str) ->
         lines.append(f"| {_label(name)} | " + " | ".join(cells) + " |")
     for condition in conditions:
         lines += ["", f"## Per clip, {condition} [mm]", "",
-                  "| clip | variant | " + " | ".join(ESTIMATED) + " | mean | run [s] | solve fps |",
-                  "| --- | --- |" + " ---: |" * (len(ESTIMATED) + 3)]
+                  "| clip | variant | " + " | ".join(ESTIMATED) + " | mean | run [s] | frames/s | solve fps |",
+                  "| --- | --- |" + " ---: |" * (len(ESTIMATED) + 4)]
         for r in results:
             if r.condition == condition:
                 errors = r.joint_errors_mm
                 lines.append(f"| {r.clip} | {_label(r.variant)} | " + " | ".join(_cell(errors[j]) for j in ESTIMATED)
-                             + f" | {_cell(r.mean_mm)} | {r.wall_seconds:.1f} | {r.solve_fps:.0f} |")
+                             + f" | {_cell(r.mean_mm)} | {r.wall_seconds:.1f} | {r.loop_fps:.0f} | {r.solve_fps:.0f} |")
     keypoints = list(dict.fromkeys(k for r in results for k in r.residuals_mm))
     lines += ["", "## Target residual per keypoint [mm]", "",
               "Distance of each target keypoint in joints.trc to its target, mean over frames and clips.", "",
