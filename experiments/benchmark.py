@@ -65,7 +65,7 @@ SCHEMES = ("liegeois", "stack", "qp")
 PARTS = {
     "kinematics": ("configuration.py", "pinocchio"),
     "projection and sampling": ("pinhole.py", "camera.py", "tasks/image.py", "silhouette_axis.py", "segments.py"),
-    "support images": ("support.py", "medial_axis.py", "distanceTransform", "views.py", "GaussianBlur"),
+    "support images": ("support.py", "medial_axis.py", "distance.py", "frame_images.py", "GaussianBlur"),
     "QP": ("_solve_level", "proxsuite", "_polish"),
     "linear algebra": ("nullspace.py", "level_loop.py", "solvers/kernels.py", "linalg", "einsum", "projection.py"),
     "solver and task bookkeeping": ("solvers/", "tasks/", "swivel.py", "tracker.py", "outcomes.py", "limits.py"),

@@ -6,6 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
+from ibik_pin.exceptions import InputError
 from ibik_pin.vision.distance import distance_to_background, signed_distance
 from ibik_pin.vision.medial_axis import medial_axis_pixels
 from ibik_pin.vision.support import SupportImage, support_from_mask
@@ -61,19 +62,35 @@ def test_the_medial_axis_from_the_bounding_box_equals_the_whole_frames(seed):
     assert checked > 50
 
 
-def test_the_float32_rounding_equals_the_float64_one_up_to_the_largest_frame():
-    """The distances rounded in place in float32 against OpenCV's rounded in float64, on seeded
-    silhouettes and on 640 x 480 frames whose only zero pixels are far apart (distances to 800 px)."""
+def opencv_distances(image: np.ndarray) -> np.ndarray:
+    """OpenCV's precise Euclidean transform, squared and rounded to whole pixels^2 in float64."""
+    raw = cv2.distanceTransform(image, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    return np.sqrt(np.rint(np.square(raw, dtype=np.float64))).astype(np.float32)
+
+
+def test_the_compiled_transform_equals_opencvs_up_to_the_largest_frame():
+    """On seeded silhouettes, random speckle of every density and size down to one pixel, and
+    640 x 480 frames whose only zero pixels are far apart (distances to 800 px)."""
     images = [1 - mask for mask in random_silhouettes(seed=5, count=30)]
     rng = np.random.default_rng(6)
     for _ in range(5):
         image = np.ones((480, 640), np.uint8)
         image[rng.integers(0, 480, 2), rng.integers(0, 640, 2)] = 0
         images.append(image)
+    for _ in range(200):
+        height, width = rng.integers(1, 40, 2)
+        image = (rng.random((height, width)) < rng.uniform(0.0, 1.0)).astype(np.uint8)
+        image.flat[rng.integers(image.size)] = 0
+        images.append(image)
     for image in images:
-        raw = cv2.distanceTransform(image, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-        expected = np.sqrt(np.rint(np.square(raw, dtype=np.float64))).astype(np.float32)
-        assert np.array_equal(distance_to_background(image), expected)
+        assert np.array_equal(distance_to_background(image), opencv_distances(image))
+        assert np.array_equal(distance_to_background(image.astype(bool)), opencv_distances(image))
+
+
+def test_an_image_without_a_zero_pixel_is_infinitely_far_from_one():
+    assert np.all(np.isinf(distance_to_background(np.ones((3, 5), np.uint8))))
+    with pytest.raises(InputError, match="expected a 2D"):
+        distance_to_background(np.zeros((2, 2, 2), np.uint8))
 
 
 def whole_frame_support(mask: np.ndarray, inside_cap_px: float, smooth_sigma_px: float) -> np.ndarray:

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import cv2
 import numpy as np
+from numba import njit
 
 from ibik_pin.exceptions import InputError
 
@@ -58,7 +58,7 @@ def signed_distance(mask: np.ndarray, region: tuple[slice, slice] | None = None,
     if inside is None:
         inside = inside_distance(mask, box)
     box = inside.box
-    values = distance_to_background(1 - mask[region].view(np.uint8))
+    values = _distances(_as_uint8(mask[region]), True)
     np.subtract(np.float32(0.5), values, out=values)  # outside: 0.5 - distance
     box_in_region = shifted(box, region)
     # copyto, not where: numpy's where on these strided views is ten times slower.
@@ -73,21 +73,73 @@ def shifted(box: tuple[slice, slice], region: tuple[slice, slice]) -> tuple[slic
 
 
 def distance_to_background(image: np.ndarray) -> np.ndarray:
-    """(H, W) float32 exact Euclidean distance [px] of every pixel to the nearest zero pixel.
+    """(H, W) float32 exact Euclidean distance [px] of every pixel to the nearest zero pixel (+inf
+    in an image without any); the image's edge is no border.
 
-    OpenCV's precise transform is exact up to its float arithmetic, whose last bits depend on the
-    image's size; every squared distance between pixels is a whole number, so rounding it makes the
-    result the same whatever part of an image is transformed, and ties (ridges) exact.
+    Each value is the float32 square root of a whole number of squared pixels, so a part of an
+    image transformed on its own gives the whole image's values wherever its nearest zero pixel
+    lies within the part, and ties (ridges) are exact.
     """
-    try:
-        raw = cv2.distanceTransform(np.ascontiguousarray(image, dtype=np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-    except cv2.error as error:  # pragma: no cover - OpenCV rejects only malformed input, checked above
-        raise InputError(f"mask: OpenCV's distance transform failed: {error}") from None
-    # In place in float32: a square below 2^20 (any 640 x 480 image) is within 0.2 of its whole
-    # number in float32 as in float64, and a float32 square root is the float64 one rounded.
-    np.square(raw, out=raw)
-    np.rint(raw, out=raw)
-    return np.sqrt(raw, out=raw)
+    return _distances(_as_uint8(image), False)
+
+
+def _as_uint8(image: np.ndarray) -> np.ndarray:
+    """A C-contiguous uint8 view (or copy) of a 2D bool or integer image: one compiled kernel."""
+    image = np.ascontiguousarray(image)
+    if image.ndim != 2:
+        raise InputError(f"image: expected a 2D (H, W) array, found shape {image.shape}")
+    return image.view(np.uint8) if image.dtype == np.bool_ else image.astype(np.uint8, copy=False)
+
+
+@njit(cache=True, nogil=True)
+def _distances(image, to_set):
+    """Exact Euclidean distance of every pixel to the nearest source pixel: the set pixels with
+    `to_set`, else the zero ones. Felzenszwalb and Huttenlocher's separable transform: each
+    column's distance to its nearest source, then along each row the lower envelope of the
+    parabolas (x - p)^2 + g_p^2, all in whole numbers of squared pixels.
+    (OpenCV's precise transform gives the same values on two threads in 1.3-2.5 times the time:
+    one computed here in one thread leaves the other core to the solver.)"""
+    height, width = image.shape
+    far = height + width  # beyond any distance within the image: no source in that column
+    column = np.empty((height, width), np.int32)
+    for j in range(width):
+        column[0, j] = 0 if (image[0, j] != 0) == to_set else far
+    for i in range(1, height):
+        for j in range(width):
+            column[i, j] = 0 if (image[i, j] != 0) == to_set else min(column[i - 1, j] + 1, far)
+    for i in range(height - 2, -1, -1):
+        for j in range(width):
+            column[i, j] = min(column[i, j], column[i + 1, j] + 1)
+    out = np.empty((height, width), np.float32)
+    apexes = np.empty(width, np.int64)  # the envelope's parabolas: where each is lowest,
+    offsets = np.empty(width, np.int64)  # g_p^2 + p^2 of each,
+    starts = np.empty(width + 1, np.float64)  # and where each starts to be the lowest
+    for i in range(height):
+        count = 0
+        for q in range(width):
+            g = np.int64(column[i, q])
+            if g >= far:
+                continue
+            offset = g * g + q * q
+            start = -np.inf
+            while count > 0:
+                start = (offset - offsets[count - 1]) / (2.0 * (q - apexes[count - 1]))
+                if start > starts[count - 1]:
+                    break
+                count -= 1
+                start = -np.inf
+            apexes[count], offsets[count], starts[count] = q, offset, start
+            count += 1
+        if count == 0:
+            out[i, :] = np.inf
+            continue
+        starts[count] = np.inf
+        k = 0
+        for x in range(width):
+            while starts[k + 1] < x:
+                k += 1
+            out[i, x] = np.sqrt(np.float32(offsets[k] - 2 * apexes[k] * x + x * x))
+    return out
 
 
 def box_around(mask: np.ndarray, margin_px: int = 0) -> tuple[slice, slice]:
