@@ -17,7 +17,6 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence, Set
 from dataclasses import dataclass, field
-from typing import cast
 
 import numpy as np
 
@@ -122,50 +121,78 @@ class SolveResult:
     failed_levels: int = field(default=0)
 
 
-def build_levels(configuration: Configuration, levels: Levels) -> list:
+@dataclass(frozen=True)
+class LevelPlan:
+    """What each level evaluates, fixed for the steps of one solve (tasks are switched on and off
+    between solves, not during one): per level None (no enabled task), its gradient task, or its
+    enabled least-squares tasks in runs of one class (each run's rows stacked in one call).
+
+    Attributes:
+        levels: the levels planned (the scheme's arranged levels).
+        entries: per level, None, a GradientTask, or a tuple of runs (each a list of tasks of one class).
+    """
+
+    levels: Levels
+    entries: tuple
+
+    @classmethod
+    def of(cls, levels: Levels) -> LevelPlan:
+        """The plan of the levels as their tasks are enabled now.
+
+        Raises:
+            InputError: a gradient task shares its level with other tasks.
+        """
+        entries: list = []
+        for index, level in enumerate(levels):
+            tasks = [task for task in level if task.enabled]
+            gradient_tasks = [task for task in tasks if isinstance(task, GradientTask)]
+            if gradient_tasks:
+                if len(tasks) != 1:
+                    raise InputError(
+                        f"level {index} mixes a gradient task with other tasks: a gradient task "
+                        "(the image criterion) must be alone in its level"
+                    )
+                entries.append(gradient_tasks[0])
+            elif tasks:
+                entries.append(tuple(list(run) for _, run in itertools.groupby(tasks, key=type)))
+            else:
+                entries.append(None)
+        return cls(levels, tuple(entries))
+
+
+def build_levels(configuration: Configuration, levels: Levels, plan: LevelPlan | None = None) -> list:
     """Evaluate the levels at the configuration: LeastSquaresLevel / GradientLevel / None (empty).
 
     Args:
         configuration: the state the step starts from.
         levels: priority levels, highest first.
+        plan: the levels' LevelPlan, when one solve's steps share it (made here otherwise).
 
     Raises:
         InputError: a gradient task shares its level with other tasks.
         SolverError: a least-squares task gives a non-finite error or Jacobian: no step exists.
     """
     built: list[LeastSquaresLevel | GradientLevel | None] = []
-    for index, level in enumerate(levels):
-        tasks = [task for task in level if task.enabled]
-        gradient_tasks = [task for task in tasks if isinstance(task, GradientTask)]
-        if gradient_tasks:
-            if len(tasks) != 1:
-                raise InputError(
-                    f"level {index} mixes a gradient task with other tasks: a gradient task "
-                    "(the image criterion) must be alone in its level"
-                )
-            task = gradient_tasks[0]
-            built.append(GradientLevel(task.compute_direction(configuration), task.compute_value(configuration),
-                                       task))
-        elif tasks:
-            least_squares = cast(list[Task], tasks)  # no gradient task in this level
-            blocks = []
-            for _, group in itertools.groupby(least_squares, key=type):  # runs of one class, in order
-                same_class = list(group)
-                blocks.append(type(same_class[0]).stacked_linear_system(same_class, configuration))
+    for entry in (plan or LevelPlan.of(levels)).entries:
+        if entry is None:
+            built.append(None)
+        elif isinstance(entry, GradientTask):
+            built.append(GradientLevel(entry.compute_direction(configuration), entry.compute_value(configuration),
+                                       entry))
+        else:
+            blocks = [type(run[0]).stacked_linear_system(run, configuration) for run in entry]
             level_rows = (LeastSquaresLevel(*blocks[0]) if len(blocks) == 1 else
                           LeastSquaresLevel(np.vstack([A for A, _ in blocks]), np.concatenate([b for _, b in blocks])))
             # NaN rows would turn the whole step, then q, into NaN without a word. One check of the
             # level's rows (tasks are many, each check a few numpy calls), then the culprit named.
             if not (all_finite(level_rows.A) and all_finite(level_rows.b)):
-                culprit = next(task for task in least_squares if not all(
+                culprit = next(task for run in entry for task in run if not all(
                     np.isfinite(rows).all() for rows in task.compute_linear_system(configuration)))
                 raise SolverError(
                     f"{type(culprit).__name__} gave a non-finite error or Jacobian (NaN or infinity); "
                     "no step can be computed"
                 )
             built.append(level_rows)
-        else:
-            built.append(None)
     return built
 
 
@@ -227,8 +254,9 @@ class Solver(ABC):
         return levels
 
     @abstractmethod
-    def compute_step(self, configuration: Configuration, levels: Levels) -> StepResult:
-        """One step from the configuration's current (already updated) kinematics."""
+    def compute_step(self, configuration: Configuration, levels: Levels, plan: LevelPlan | None = None) -> StepResult:
+        """One step from the configuration's current (already updated) kinematics; `plan`: the
+        LevelPlan of self.arrange(levels) when a solve's steps share it (made here otherwise)."""
 
     def solve(
         self,
@@ -254,8 +282,9 @@ class Solver(ABC):
         self.step_adaptation.reset()
         step_norms = []
         step = StepResult(np.zeros(configuration.nv), [])
+        plan = LevelPlan.of(self.arrange(levels))  # the same for every step of this solve
         for _ in range(int(iterations)):
-            step = self.compute_step(configuration, levels)
+            step = self.compute_step(configuration, levels, plan)
             q = configuration.integrate(step.dq)
             if self.limits is not None:
                 q = self.limits.clamp(q)

@@ -33,6 +33,7 @@ from ibik_pin.configuration import Configuration
 from ibik_pin.limits import JointLimits
 from ibik_pin.solvers.base import (
     DEFAULT_DAMPING,
+    LevelPlan,
     Levels,
     Solver,
     StepResult,
@@ -98,8 +99,8 @@ class HierarchicalQPSolver(Solver):
         self._qps[(level, n, n_in)] = qp
         return qp, True
 
-    def compute_step(self, configuration: Configuration, levels: Levels) -> StepResult:
-        built = build_levels(configuration, self.arrange(levels))
+    def compute_step(self, configuration: Configuration, levels: Levels, plan: LevelPlan | None = None) -> StepResult:
+        built = build_levels(configuration, plan.levels if plan else self.arrange(levels), plan)
         nv = configuration.nv
         if self.limits is not None:
             lower, upper = self.limits.step_bounds(configuration.q)

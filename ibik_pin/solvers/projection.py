@@ -22,6 +22,7 @@ import numpy as np
 
 from ibik_pin.configuration import Configuration
 from ibik_pin.solvers.base import (
+    LevelPlan,
     Levels,
     Solver,
     StepResult,
@@ -39,8 +40,8 @@ class PriorityStackSolver(Solver):
 
     name = "stack"
 
-    def compute_step(self, configuration: Configuration, levels: Levels) -> StepResult:
-        built = build_levels(configuration, self.arrange(levels))
+    def compute_step(self, configuration: Configuration, levels: Levels, plan: LevelPlan | None = None) -> StepResult:
+        built = build_levels(configuration, plan.levels if plan else self.arrange(levels), plan)
         nv = configuration.nv
         packed = PackedLevels(built, self.step_adaptation, nv)
         if self.limits is None:
