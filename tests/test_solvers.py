@@ -545,3 +545,26 @@ def test_the_compiled_bound_check_is_numpys(rng):
     answers = [within_bounds(values, lower, upper) for values in cases]
     assert answers == [bool((values >= lower).all() and (values <= upper).all()) for values in cases]
     assert answers == [True, True, True, False, False, False]
+
+
+@pytest.mark.parametrize("solver_name", ["stack", "qp", "liegeois", "ik"])
+def test_a_solve_planned_once_equals_its_steps_planned_each_time(human, solver_name):
+    """Solver.solve plans its levels once (LevelPlan, with the position rows' constants kept): the
+    same motion, to the bit, as steps that each plan the levels afresh, targets changed between."""
+    rng = np.random.default_rng(11)
+    limits = JointLimits(human.model)
+    solver = make_solver(solver_name, limits=limits)
+    levels = human_levels(human, random_human_configuration(human, rng))
+    levels.insert(2, [FrameHeight(human, "LElbow")])  # a gradient level, as the image's
+    start = random_human_configuration(human, rng)
+    stepped = Configuration(human.model, start)
+    solved = Configuration(human.model, start)
+    for _ in range(2):  # two solves, the targets moved between them
+        solver.solve(solved, levels, iterations=6)
+        solver.step_adaptation.reset()
+        for _ in range(6):
+            step = solver.compute_step(stepped, levels)
+            stepped.update(limits.clamp(stepped.integrate(step.dq)))
+        np.testing.assert_array_equal(solved.q, stepped.q)
+        for task in levels[1]:
+            task.set_target(task.target + rng.normal(0.0, 0.05, 3))

@@ -86,6 +86,16 @@ def test_stacked_position_rows_are_each_tasks_rows_to_the_bit(human, rng):
         def compute_error(self, configuration):
             return super().compute_error(configuration) + 1.0
 
+    # A solve's memo keeps the tasks' constants: the rows stay each task's at another configuration.
+    memo: dict = {}
+    moved = Configuration(human.model, random_human_configuration(human, rng))
+    for state in (configuration, moved, configuration):
+        A, b = FramePositionTask.stacked_linear_system(tasks, state, memo)
+        rows = [task.compute_linear_system(state) for task in tasks]
+        assert np.array_equal(A, np.vstack([rows_A for rows_A, _ in rows]))
+        assert np.array_equal(b, np.concatenate([rows_b for _, rows_b in rows]))
+    assert "position rows" in memo
+
     shifted = [Shifted(human.model, "Head", target=[0.0, 0.0, 1.0])]
     assert np.array_equal(Shifted.stacked_linear_system(shifted, configuration)[1],
                           shifted[0].compute_linear_system(configuration)[1])

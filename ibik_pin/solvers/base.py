@@ -123,13 +123,14 @@ class SolveResult:
 
 @dataclass(frozen=True)
 class LevelPlan:
-    """What each level evaluates, fixed for the steps of one solve (tasks are switched on and off
-    between solves, not during one): per level None (no enabled task), its gradient task, or its
-    enabled least-squares tasks in runs of one class (each run's rows stacked in one call).
+    """What each level evaluates, fixed for the steps of one solve (tasks are switched on and off,
+    and given their targets, between solves, not during one): per level None (no enabled task), its
+    gradient task, or its enabled least-squares tasks in runs of one class (each run's rows stacked
+    in one call, with a memo of what stays the same over the solve: Task.stacked_linear_system).
 
     Attributes:
         levels: the levels planned (the scheme's arranged levels).
-        entries: per level, None, a GradientTask, or a tuple of runs (each a list of tasks of one class).
+        entries: per level, None, a GradientTask, or a tuple of runs, each (tasks of one class, memo).
     """
 
     levels: Levels
@@ -154,7 +155,7 @@ class LevelPlan:
                     )
                 entries.append(gradient_tasks[0])
             elif tasks:
-                entries.append(tuple(list(run) for _, run in itertools.groupby(tasks, key=type)))
+                entries.append(tuple((list(run), {}) for _, run in itertools.groupby(tasks, key=type)))
             else:
                 entries.append(None)
         return cls(levels, tuple(entries))
@@ -180,13 +181,13 @@ def build_levels(configuration: Configuration, levels: Levels, plan: LevelPlan |
             built.append(GradientLevel(entry.compute_direction(configuration), entry.compute_value(configuration),
                                        entry))
         else:
-            blocks = [type(run[0]).stacked_linear_system(run, configuration) for run in entry]
+            blocks = [type(run[0]).stacked_linear_system(run, configuration, memo) for run, memo in entry]
             level_rows = (LeastSquaresLevel(*blocks[0]) if len(blocks) == 1 else
                           LeastSquaresLevel(np.vstack([A for A, _ in blocks]), np.concatenate([b for _, b in blocks])))
             # NaN rows would turn the whole step, then q, into NaN without a word. One check of the
             # level's rows (tasks are many, each check a few numpy calls), then the culprit named.
             if not (all_finite(level_rows.A) and all_finite(level_rows.b)):
-                culprit = next(task for run in entry for task in run if not all(
+                culprit = next(task for run, _ in entry for task in run if not all(
                     np.isfinite(rows).all() for rows in task.compute_linear_system(configuration)))
                 raise SolverError(
                     f"{type(culprit).__name__} gave a non-finite error or Jacobian (NaN or infinity); "

@@ -66,11 +66,14 @@ class Task(ABC):
         )
 
     @classmethod
-    def stacked_linear_system(cls, tasks: Sequence[Task],
-                              configuration: Configuration) -> tuple[np.ndarray, np.ndarray]:
+    def stacked_linear_system(cls, tasks: Sequence[Task], configuration: Configuration,
+                              memo: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The rows (A, b) of several tasks of this class, stacked in order: each task's
         compute_linear_system, in one (m, nv) and one (m,). A class whose tasks' rows come faster
-        together (FramePositionTask: one read of every frame's Jacobian) overrides this."""
+        together (FramePositionTask: one read of every frame's Jacobian) overrides this.
+
+        `memo`: a dict the solver keeps for the steps of one solve, in which an override may keep
+        what does not change during a solve (the tasks' frames, targets, weights and gains)."""
         if len(tasks) == 1:  # no copy into a stack of one
             return tasks[0].compute_linear_system(configuration)
         rows = [task.compute_linear_system(configuration) for task in tasks]

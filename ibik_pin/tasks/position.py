@@ -90,20 +90,27 @@ class FramePositionTask(Task):
         return np.where(self.driven, jacobian, 0.0)
 
     @classmethod
-    def stacked_linear_system(cls, tasks: Sequence[Task],
-                              configuration: Configuration) -> tuple[np.ndarray, np.ndarray]:
+    def stacked_linear_system(cls, tasks: Sequence[Task], configuration: Configuration,
+                              memo: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The tasks' rows from one read of their frames' positions and Jacobians: the rows
         compute_linear_system gives each, to the bit. A subclass (which may change the error or the
-        Jacobian) gets the rows task by task."""
+        Jacobian) gets the rows task by task. With `memo`, the frames, column scales, targets and
+        error scales are gathered at a solve's first step only (they change between solves)."""
         if cls is not FramePositionTask:
-            return super().stacked_linear_system(tasks, configuration)
-        chosen = cast(Sequence[FramePositionTask], tasks)
-        frame_ids = np.array([task.frame_id for task in chosen])
+            return super().stacked_linear_system(tasks, configuration, memo)
+        constants = memo.get("position rows") if memo is not None else None
+        if constants is None:
+            chosen = cast(Sequence[FramePositionTask], tasks)
+            constants = (np.array([task.frame_id for task in chosen]),
+                         np.array([task.column_scales() for task in chosen]),
+                         np.array([task.target for task in chosen]),
+                         np.array([-math.sqrt(task.weight) * task.gain for task in chosen]))
+            if memo is not None:
+                memo["position rows"] = constants
+        frame_ids, column_scales, targets, error_scales = constants
         positions, jacobians = configuration.frame_arrays(frame_ids)
-        A, b = np.empty((3 * len(chosen), configuration.nv)), np.empty(3 * len(chosen))
-        _position_rows(positions, jacobians, frame_ids, np.array([task.column_scales() for task in chosen]),
-                       np.array([task.target for task in chosen]),
-                       np.array([-math.sqrt(task.weight) * task.gain for task in chosen]), A, b)
+        A, b = np.empty((3 * len(frame_ids), configuration.nv)), np.empty(3 * len(frame_ids))
+        _position_rows(positions, jacobians, frame_ids, column_scales, targets, error_scales, A, b)
         return A, b
 
     def column_scales(self) -> np.ndarray:
