@@ -1,8 +1,8 @@
 """Each frame's image inputs, prepared one frame ahead in a worker thread.
 
 Reading a frame's silhouettes and building its support images and medial axes needs nothing from
-the solve, and their heavy parts (OpenCV's decoding and distance transforms, numpy on whole images)
-release the GIL. So a worker thread prepares frame t + 1 while the main thread solves frame t, and
+the solve, and their heavy parts (OpenCV's decoding, the compiled distance transforms and medial
+axis, numpy on whole images) release the GIL. So a worker thread prepares frame t + 1 while the main thread solves frame t, and
 on two cores or more the images cost the tracking loop little of their time.
 
 The worker runs the frames in order, one at a time, so a silhouette source that remembers what it
