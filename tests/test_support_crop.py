@@ -89,6 +89,9 @@ def test_the_compiled_transform_equals_opencvs_up_to_the_largest_frame():
 
 def test_an_image_without_a_zero_pixel_is_infinitely_far_from_one():
     assert np.all(np.isinf(distance_to_background(np.ones((3, 5), np.uint8))))
+    # Any numbers: non-zero is set (256 stays set, not wrapped to 0 as a uint8 cast would).
+    assert np.all(np.isinf(distance_to_background(np.full((2, 3), 256, np.int32))))
+    assert distance_to_background(np.zeros((0, 4), np.uint8)).shape == (0, 4)
     with pytest.raises(InputError, match="expected a 2D"):
         distance_to_background(np.zeros((2, 2, 2), np.uint8))
 

@@ -2,8 +2,9 @@
 
 Reading a frame's silhouettes and building its support images and medial axes needs nothing from
 the solve, and their heavy parts (OpenCV's decoding, the compiled distance transforms and medial
-axis, numpy on whole images) release the GIL. So a worker thread prepares frame t + 1 while the main thread solves frame t, and
-on two cores or more the images cost the tracking loop little of their time.
+axis, numpy on whole images) release the GIL. So a worker thread prepares frame t + 1 while the
+main thread solves frame t, and on two cores or more the images cost the tracking loop little of
+their time.
 
 The worker runs the frames in order, one at a time, so a silhouette source that remembers what it
 read (a temporal filter, the silhouette quality report) sees the same calls as without it. An error

@@ -80,15 +80,18 @@ def distance_to_background(image: np.ndarray) -> np.ndarray:
     image transformed on its own gives the whole image's values wherever its nearest zero pixel
     lies within the part, and ties (ridges) are exact.
     """
-    return _distances(_as_uint8(image), False)
+    image = _as_uint8(image)
+    return _distances(image, False) if image.size else np.zeros(image.shape, np.float32)
 
 
 def _as_uint8(image: np.ndarray) -> np.ndarray:
-    """A C-contiguous uint8 view (or copy) of a 2D bool or integer image: one compiled kernel."""
+    """A C-contiguous uint8 image, non-zero where `image` (2D, any numbers) is: one compiled kernel."""
     image = np.ascontiguousarray(image)
     if image.ndim != 2:
         raise InputError(f"image: expected a 2D (H, W) array, found shape {image.shape}")
-    return image.view(np.uint8) if image.dtype == np.bool_ else image.astype(np.uint8, copy=False)
+    if image.dtype == np.uint8:
+        return image
+    return (image if image.dtype == np.bool_ else image != 0).view(np.uint8)
 
 
 @njit(cache=True, nogil=True)
