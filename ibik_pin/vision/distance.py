@@ -24,18 +24,21 @@ class InsideDistance(NamedTuple):
     Attributes:
         values: (h, w) float32 distance [px] of each pixel of `box` to the nearest unset pixel.
         box: (rows, columns) the silhouette's bounding box grown by one pixel, clipped to the frame.
+        silhouette_box: (rows, columns) the silhouette's bounding box (box_around(mask)).
     """
 
     values: np.ndarray
     box: tuple[slice, slice]
+    silhouette_box: tuple[slice, slice]
 
 
 def inside_distance(mask: np.ndarray, box: tuple[slice, slice] | None = None) -> InsideDistance:
     """The distance to the background of a non-empty (H, W) bool mask on its bounding box grown by
     one pixel (`box`: that bounding box if known, box_around(mask)); what both the support image
     and the medial axis read, computed once for them."""
-    grown_box = grown(box_around(mask) if box is None else box, 1, mask.shape)
-    return InsideDistance(distance_to_background(mask[grown_box].view(np.uint8)), grown_box)
+    box = box_around(mask) if box is None else box
+    grown_box = grown(box, 1, mask.shape)
+    return InsideDistance(distance_to_background(mask[grown_box].view(np.uint8)), grown_box, box)
 
 
 def signed_distance(mask: np.ndarray, region: tuple[slice, slice] | None = None,

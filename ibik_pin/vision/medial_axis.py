@@ -47,15 +47,15 @@ def medial_axis_pixels(
         raise InputError(f"mask: expected a 2D (H, W) image, found shape {mask.shape}")
     if int(spacing_px) < 1 or int(max_points) < 1:
         raise InputError(f"spacing_px and max_points must be >= 1, got {spacing_px} and {max_points}")
-    person = (mask != 0).view(np.uint8)
-    if not person.any():
-        return np.zeros((0, 2))
     # Only the silhouette's bounding box: outside it the depth is 0 and no pixel is on the ridge.
-    box_rows, box_columns = box_around(person)
-    padded = (slice(box_rows.start - 1, box_rows.stop + 1), slice(box_columns.start - 1, box_columns.stop + 1))
-    if inside is not None and inside.box == padded:  # the same pixels: the box and its ring of background
+    if inside is not None and inside.box == _padded(inside.silhouette_box):
+        box_rows, box_columns = inside.silhouette_box  # the same pixels: the box and its ring of background
         depth = inside.values
     else:
+        person = (mask != 0).view(np.uint8)
+        if not person.any():
+            return np.zeros((0, 2))
+        box_rows, box_columns = box_around(person)
         depth = distance_to_background(np.pad(person[box_rows, box_columns], 1))
     spacing = int(spacing_px)
     columns, rows = _thinned_ridge(depth, float(min_depth_px), spacing, box_rows.start, box_columns.start)
@@ -63,6 +63,11 @@ def medial_axis_pixels(
         kept = np.linspace(0, columns.size - 1, int(max_points)).round().astype(np.int64)
         columns, rows = columns[kept], rows[kept]
     return np.column_stack((columns, rows)).astype(np.float64)
+
+
+def _padded(box: tuple[slice, slice]) -> tuple[slice, slice]:
+    """The box grown by one pixel on every side, not clipped to the frame."""
+    return slice(box[0].start - 1, box[0].stop + 1), slice(box[1].start - 1, box[1].stop + 1)
 
 
 @njit(cache=True, nogil=True)

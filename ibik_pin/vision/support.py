@@ -21,7 +21,7 @@ import numpy as np
 
 from ibik_pin.checks import as_mask
 from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
-from ibik_pin.vision.distance import InsideDistance, box_around, inside_distance, shifted, signed_distance
+from ibik_pin.vision.distance import InsideDistance, inside_distance, shifted, signed_distance
 from ibik_pin.vision.kernels import support_sample
 
 
@@ -248,9 +248,9 @@ def support_from_mask(
         # No border in the image: every pixel is deep inside.
         inside_value = inside_cap_px if inside_cap_px is not None else float(max(mask.shape))
         return SupportImage(np.full(mask.shape, inside_value, np.float32))
-    box = box_around(mask)
     if inside is None:
-        inside = inside_distance(mask, box)
+        inside = inside_distance(mask)
+    box = inside.silhouette_box
     support_values = functools.partial(_support_values, mask, box=box, inside=inside, inside_cap_px=inside_cap_px,
                                        outside_cap_px=outside_cap_px, smooth_sigma_px=smooth_sigma_px)
     window = _window_around(box, mask.shape, smooth_sigma_px)
