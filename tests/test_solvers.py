@@ -407,6 +407,30 @@ def test_the_qr_factorisation_gives_the_svds_step_and_null_space(rng):
         np.testing.assert_allclose(remaining @ remaining.T, np.eye(zero.shape[1]), atol=1e-12)
 
 
+def test_the_residual_outside_a_range_is_the_svds(rng):
+    """|r - P r| with P the projector on a matrix's range, wide, square and tall, full rank and
+    rank-deficient (a dependent column, a zero row and column), against the SVD's; and nothing
+    outside the range of a full-row-rank matrix, everything outside that of a zero one."""
+    from ibik_pin.solvers.nullspace import range_residual
+
+    for rows, size in [(21, 44), (18, 23), (44, 44), (44, 5), (1, 8), (7, 1)]:
+        for deficiency in range(3):
+            matrix = rng.normal(size=(rows, size))
+            if deficiency == 1 and size > 2:
+                matrix[:, -1] = matrix[:, 0] - 2.0 * matrix[:, 1]
+            if deficiency == 2:
+                matrix[0] = 0.0
+                matrix[:, -1] = 0.0
+            request = rng.normal(size=rows)
+            u, sigma, _ = np.linalg.svd(matrix, full_matrices=False)
+            basis = u[:, sigma > 1e-10 * max(1.0, sigma[0])]
+            expected = np.linalg.norm(request - basis @ (basis.T @ request))
+            assert range_residual(matrix, request) == pytest.approx(expected, abs=1e-10)
+    assert range_residual(rng.normal(size=(5, 9)), rng.normal(size=5)) == pytest.approx(0.0, abs=1e-12)
+    request = rng.normal(size=4)
+    assert range_residual(np.zeros((4, 3)), request) == pytest.approx(np.linalg.norm(request), rel=1e-15)
+
+
 def test_rows_that_each_hold_one_coordinate_take_the_qr_factorisations_step_and_null_space(rng):
     """A posture task on some coordinates (the trunk hold) skips the factorisation: the same step
     and null space as the pivoted QR, a row too weak to count (below the rank tolerance) and a zero

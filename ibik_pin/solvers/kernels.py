@@ -84,23 +84,18 @@ def reflect(row, reflector, j, tau):
 
 
 @njit(cache=True, nogil=True)
-def factor(projected, damping):
-    """The damped least squares' factors of a level's projected Jacobian M (m, r), and its null space.
+def householder(work):
+    """Column-pivoted Householder QR of work^T, in place, as LAPACK's geqp3 pivots, stopped at the
+    rank (the first remaining column norm at or below RANK_TOLERANCE times the largest, or 1).
 
-    Column-pivoted Householder QR of M^T, M^T P = Q R: the first k columns of Q (k the rank, the
-    diagonal of R above RANK_TOLERANCE) span the range of M^T, where the damped least squares
-    lives, and the others M's null space. With w = Q_k y the problem is
-    min |M Q_k y - residual|^2 + damping^2 |y|^2, a k x k Cholesky solve.
+    work^T's columns are work's rows: Householder on rows keeps every inner loop contiguous. After
+    step j, row c holds R[:j+1, c] in its first entries and, for c <= j, the reflector
+    v_j = (1, work[j, j+1:]) past the diagonal.
 
     Returns:
-        Q_k (r, k), (M Q_k)^T (k, m), the Cholesky factor of (M Q_k)^T (M Q_k) + damping^2 I
-        (k, k), the null-space basis (r, r - k), and whether the factorisation held.
+        the row permutation (pivots), the reflectors' taus and the rank k.
     """
-    rows, size = projected.shape
-    # M^T's columns are M's rows: Householder on rows of a copy keeps every inner loop contiguous.
-    # After step j, row c holds R[:j+1, c] in its first entries and, for c <= j, the reflector
-    # v_j = (1, work[j, j+1:]) past the diagonal.
-    work = projected.copy()
+    rows, size = work.shape
     pivots = np.arange(rows)
     taus = np.zeros(min(rows, size))
     rank, largest = 0, 0.0
@@ -131,6 +126,41 @@ def factor(projected, damping):
         for c in range(j + 1, rows):  # H_j on the columns to the right
             reflect(work[c], work[j], j, taus[j])
         rank = j + 1
+    return pivots, taus, rank
+
+
+@njit(cache=True, nogil=True)
+def range_residual(columns, vector):
+    """|vector - its projection on the span of the rows of `columns`| (n, m), the rank counted as
+    `factor` counts it, without forming the basis: the reflectors of `householder` applied to the
+    vector leave its component outside the span in its entries past the rank."""
+    work = columns.copy()
+    _, taus, rank = householder(work)
+    rest = vector.copy()
+    for j in range(rank):
+        reflect(rest, work[j], j, taus[j])
+    total = 0.0
+    for i in range(rank, rest.shape[0]):
+        total += rest[i] * rest[i]
+    return np.sqrt(total)
+
+
+@njit(cache=True, nogil=True)
+def factor(projected, damping):
+    """The damped least squares' factors of a level's projected Jacobian M (m, r), and its null space.
+
+    Column-pivoted Householder QR of M^T, M^T P = Q R: the first k columns of Q (k the rank, the
+    diagonal of R above RANK_TOLERANCE) span the range of M^T, where the damped least squares
+    lives, and the others M's null space. With w = Q_k y the problem is
+    min |M Q_k y - residual|^2 + damping^2 |y|^2, a k x k Cholesky solve.
+
+    Returns:
+        Q_k (r, k), (M Q_k)^T (k, m), the Cholesky factor of (M Q_k)^T (M Q_k) + damping^2 I
+        (k, k), the null-space basis (r, r - k), and whether the factorisation held.
+    """
+    rows, size = projected.shape
+    work = projected.copy()
+    pivots, taus, rank = householder(work)
     # Q = H_0 ... H_{k-1}, accumulated backwards on its transpose (rows of qt are columns of Q):
     # before H_j, the columns left of j are still those of the identity, which H_j leaves alone.
     qt = np.eye(size)

@@ -20,7 +20,7 @@ from ibik_pin.exceptions import SolverError
 from ibik_pin.solvers import kernels
 from ibik_pin.solvers.kernels import RANK_TOLERANCE
 
-__all__ = ["RANK_TOLERANCE", "damped_solve", "damped_step", "range_basis", "remove_direction"]
+__all__ = ["RANK_TOLERANCE", "damped_solve", "damped_step", "range_residual", "remove_direction"]
 
 
 def damped_solve(projected: np.ndarray, residual: np.ndarray, damping: float) -> tuple[np.ndarray, np.ndarray]:
@@ -60,17 +60,19 @@ def damped_step(projected: np.ndarray, residual: np.ndarray, damping: float) -> 
     return w
 
 
-def range_basis(matrix: np.ndarray) -> np.ndarray:
-    """Orthonormal basis (m, k) of the range of a matrix (m, n), its rank k counted as the levels'
-    factorisation counts it (the column-pivoted QR of damped_solve, here of the matrix's transpose).
+def range_residual(matrix: np.ndarray, vector: np.ndarray) -> float:
+    """|vector - its projection on the range of a matrix (m, n)|, the matrix's rank counted as the
+    levels' factorisation counts it (the column-pivoted QR of damped_solve, here of the matrix's
+    transpose), the basis never formed.
 
     Raises:
-        SolverError: the matrix could not be factored (non-finite).
+        SolverError: the matrix or the vector is not finite.
     """
-    basis, _, _, _, ok = kernels.factor(np.ascontiguousarray(np.transpose(matrix), dtype=np.float64), 1.0)
-    if not ok:
-        raise SolverError(f"the range of a {matrix.shape} matrix could not be factored (a non-finite matrix?)")
-    return basis
+    matrix = np.ascontiguousarray(np.transpose(matrix), dtype=np.float64)
+    vector = np.ascontiguousarray(vector, dtype=np.float64)
+    if not (np.isfinite(matrix).all() and np.isfinite(vector).all()):
+        raise SolverError(f"the range of a {matrix.shape[::-1]} matrix: expected finite numbers")
+    return float(kernels.range_residual(matrix, vector))
 
 
 def remove_direction(reduced: np.ndarray) -> np.ndarray:

@@ -27,7 +27,7 @@ import numpy as np
 
 from ibik_pin.configuration import Configuration
 from ibik_pin.solvers import LevelReport
-from ibik_pin.solvers.nullspace import RANK_TOLERANCE, damped_solve, range_basis, remove_direction
+from ibik_pin.solvers.nullspace import RANK_TOLERANCE, damped_solve, range_residual, remove_direction
 from ibik_pin.tasks.base import GradientTask, Task
 from ibik_pin.tasks.criterion_step import CriterionStepTask
 from ibik_pin.tracking.levels import StackPlan
@@ -62,8 +62,7 @@ def _unexplained(matrix: np.ndarray, request: np.ndarray) -> float:
     """|request - its projection on the range of matrix|, ranks as the solvers count them."""
     if matrix.size == 0:
         return float(np.linalg.norm(request))
-    basis = range_basis(matrix)
-    return float(np.linalg.norm(request - basis @ (basis.T @ request)))
+    return range_residual(matrix, request)
 
 
 def _weighted_rows(tasks: Sequence, configuration: Configuration) -> tuple[np.ndarray, np.ndarray]:
