@@ -20,9 +20,6 @@ from ibik_pin.vision.distance import InsideDistance, box_around, distance_to_bac
 
 __all__ = ["medial_axis_pixels"]
 
-# Neighbour offsets (row, column) of the four directions through a pixel.
-_DIRECTIONS = ((0, 1), (1, 0), (1, 1), (1, -1))
-
 
 def medial_axis_pixels(
     mask: np.ndarray, min_depth_px: float = 1.5, spacing_px: int = 3, max_points: int = 600,
