@@ -19,7 +19,7 @@ import numpy as np
 from ibik_pin.solvers.kernels import STEP_SIZE, adapt_step_size
 from ibik_pin.tasks.base import GradientTask
 
-__all__ = ["StepAdaptation", "adapt_step_size"]
+__all__ = ["StepAdaptation"]
 
 
 class StepAdaptation:
