@@ -68,6 +68,10 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
                         help="end a frame's solve early once a step moves the joints less than this "
                              "(norm of dq); report.json gives the mean steps per frame (default: always "
                              "--iterations)")
+    parser.add_argument("--image-stop", choices=("peak", "count"), default="peak",
+                        help="where a frame's image steps end: peak (default): once the image criterion "
+                             "no longer rises, at the best step, or after --iterations; count: always "
+                             "--iterations steps, as in the paper (report.json gives the mean steps per frame)")
     parser.add_argument("--no-image", action="store_true",
                         help="the same solve without the image criterion (blind baseline)")
     parser.add_argument("--iterations", type=int, default=15, help="solver steps per frame")
@@ -120,7 +124,7 @@ def _job(arguments: argparse.Namespace) -> TrackJob:
         cameras=None if arguments.cameras is None else [name.strip() for name in arguments.cameras.split(",")],
         model=arguments.model,
         settings=TrackingSettings(method=arguments.method, iterations=arguments.iterations,
-                                  step_tolerance=arguments.step_tolerance,
+                                  step_tolerance=arguments.step_tolerance, image_stop=arguments.image_stop,
                                   use_image=not arguments.no_image, mask_filter_radius=arguments.mask_filter,
                                   criterion=arguments.criterion, swivel_search=arguments.swivel_search,
                                   image_moves=arguments.image_moves, read_ahead=arguments.read_ahead,

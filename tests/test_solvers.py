@@ -592,3 +592,49 @@ def test_a_solve_planned_once_equals_its_steps_planned_each_time(human, solver_n
         np.testing.assert_array_equal(solved.q, stepped.q)
         for task in levels[1]:
             task.set_target(task.target + rng.normal(0.0, 0.05, 3))
+
+
+@pytest.mark.parametrize("solver_name", ["liegeois", "stack", "qp"])
+def test_a_solve_stopped_at_the_peak_is_the_counted_solve_cut_at_its_best_step(solver_name):
+    """The elbow raised with the wrist held: steps of 0.3 rad overshoot the highest elbow and the
+    criterion falls. stop_at_peak ends the solve there: its motion is the counted solve's up to
+    that step, to the bit, and so are the level reports; the criterion is the highest of every
+    count of steps from one up to it; the step undone does not raise it."""
+    body = load_arm()
+    start = np.array([0.3, 0.4, 0.2, 0.9, 0.1, 0.5])
+    wrist = FramePositionTask(body.model, body.keypoints["Wrist"])
+    wrist.set_target(Configuration(body.model, start).frame_position(body.frame_id("Wrist")).copy())
+    criterion = FrameHeight(body, "Elbow", max_step_size=0.3)
+    levels = [[wrist], [criterion]]
+    solver = make_solver(solver_name, limits=JointLimits(body.model))
+
+    def counted(steps):
+        configuration = Configuration(body.model, start)
+        solver.solve(configuration, levels, iterations=steps)
+        return configuration
+
+    peaked = Configuration(body.model, start)
+    result = solver.solve(peaked, levels, iterations=40, stop_at_peak=True)
+    assert 2 <= result.iterations < 40
+    assert result.step_norms.shape == (result.iterations,)
+    np.testing.assert_array_equal(peaked.q, counted(result.iterations).q)
+    counted_result = solver.solve(Configuration(body.model, start), levels, iterations=result.iterations)
+    np.testing.assert_equal([dataclasses.astuple(report) for report in result.levels],
+                            [dataclasses.astuple(report) for report in counted_result.levels])
+    heights = [criterion.compute_value(counted(steps)) for steps in range(1, result.iterations + 2)]
+    assert criterion.compute_value(peaked) == max(heights[:-1])
+    assert heights[-1] <= heights[-2]
+
+
+@pytest.mark.parametrize("solver_name", ["stack", "qp"])
+def test_stopping_at_the_peak_changes_nothing_without_a_gradient_level(human, solver_name):
+    rng = np.random.default_rng(5)
+    levels = human_levels(human, random_human_configuration(human, rng))
+    start = random_human_configuration(human, rng)
+    solver = make_solver(solver_name, limits=JointLimits(human.model))
+    runs = []
+    for stop_at_peak in (False, True):
+        configuration = Configuration(human.model, start)
+        runs.append((solver.solve(configuration, levels, iterations=8, stop_at_peak=stop_at_peak), configuration.q))
+    assert runs[0][0].iterations == runs[1][0].iterations == 8
+    np.testing.assert_array_equal(runs[0][1], runs[1][1])

@@ -145,6 +145,25 @@ def test_the_image_steps_move_the_trunk_only_when_asked(human, sequence, image_m
         assert moves.max() > 1e-6
 
 
+def test_the_image_steps_stop_at_the_criterions_peak_unless_counted(human, sequence):
+    """image_stop "count" takes every step; "peak" ends a frame's image steps once the criterion
+    stops rising (Solver.solve's stop_at_peak, tested in test_solvers), never before two steps,
+    and the targets are still met."""
+    motion, targets = sequence
+    cameras, masks = _two_views(human, motion)
+    counted, peaked = [Tracker(human, cameras, fast_settings(iterations=12, first_frame_iterations=20, image_stop=stop))
+                       .track(TARGETS, targets, silhouettes=lambda frame: masks[frame]) for stop in ("count", "peak")]
+    assert counted.iterations[1:] == [12] * (FRAMES - 1)
+    assert all(2 <= steps <= 12 for steps in peaked.iterations[1:])
+    assert sum(peaked.iterations[1:]) < 12 * (FRAMES - 1), peaked.iterations
+    assert np.nanmax(peaked.target_distances) < 1e-3
+
+
+def test_an_unknown_image_stop_is_refused(human):
+    with pytest.raises(InputError, match="image_stop: expected one of peak, count, found 'never'"):
+        Tracker(human, settings=fast_settings(image_stop="never"))
+
+
 def test_an_unknown_image_moves_is_refused(human):
     with pytest.raises(InputError, match="image_moves: expected one of limbs, all, found 'trunk'"):
         Tracker(human, settings=fast_settings(image_moves="trunk"))

@@ -84,15 +84,18 @@ class LevelReport:
 
 
 class StepResult:
-    """One step: dq (nv,) and the report of every level.
+    """One step: dq (nv,), the report of every level, and `criterion`: the first gradient level's
+    h(q) before the step (NaN without one), which `Solver.solve` watches with `stop_at_peak`.
 
     The reports may be given as a function that computes them, called when they are first read: a
     solve reads its last step's only, and a report costs a residual per level.
     """
 
-    def __init__(self, dq: np.ndarray, levels: list[LevelReport] | Callable[[], list[LevelReport]]) -> None:
+    def __init__(self, dq: np.ndarray, levels: list[LevelReport] | Callable[[], list[LevelReport]],
+                 criterion: float = float("nan")) -> None:
         self.dq = dq
         self._levels = levels
+        self.criterion = criterion
 
     @property
     def levels(self) -> list[LevelReport]:
@@ -197,6 +200,11 @@ def build_levels(configuration: Configuration, levels: Levels, plan: LevelPlan |
     return built
 
 
+def climbed_value(built: list) -> float:
+    """h(q) of the first gradient level of `built` (build_levels), NaN without one."""
+    return next((level.value for level in built if isinstance(level, GradientLevel)), float("nan"))
+
+
 def least_squares_status(residual: float, b: np.ndarray) -> str:
     """"solved" when the residual is small next to the requested change (damping alone leaves
     lambda^2 / (sigma^2 + lambda^2) of it), else "relaxed"."""
@@ -265,6 +273,7 @@ class Solver(ABC):
         levels: Levels,
         iterations: int = 15,
         tolerance: float | None = None,
+        stop_at_peak: bool = False,
     ) -> SolveResult:
         """Iterate steps from configuration.q; the configuration ends updated at the result.
 
@@ -273,6 +282,14 @@ class Solver(ABC):
             levels: priority levels, highest first.
             iterations: maximum number of steps (the paper uses 15 per frame).
             tolerance: stop early once |dq| < tolerance.
+            stop_at_peak: stop once the first gradient level's criterion no longer rises: when the
+                criterion after a step (from the second on) is not above its value after the step
+                before, that step is undone and the solve ends there, at the best of the two. The
+                first step is not judged: it also carries the higher levels' move to their new
+                targets, which may lower the criterion. A step of bounded norm along a gradient
+                rarely lands on a maximum; past it, steps go back and forth around it (on real
+                motion, whole-body steps kept a norm near 0.1 rad to the fifteenth), and a climb
+                that is still gaining keeps going (docs/method.md, "Where the image steps stop").
 
         Raises:
             InputError: iterations below 1, or a gradient task sharing its level.
@@ -281,11 +298,22 @@ class Solver(ABC):
         if int(iterations) < 1:
             raise InputError(f"iterations must be >= 1, got {iterations}")
         self.step_adaptation.reset()
-        step_norms = []
+        step_norms: list[float] = []
         step = StepResult(np.zeros(configuration.nv), [])
         plan = LevelPlan.of(self.arrange(levels))  # the same for every step of this solve
-        for _ in range(int(iterations)):
-            step = self.compute_step(configuration, levels, plan)
+        # With stop_at_peak: q before the last step, the criterion there, and the step before it
+        # (whose reports the solve returns if the last is undone).
+        previous_q, previous_value, previous_step = configuration.q, float("nan"), step
+        for index in range(int(iterations)):
+            taken, step = step, self.compute_step(configuration, levels, plan)
+            if stop_at_peak:
+                # step.criterion is h after `index` steps; NaN (no gradient level) never stops.
+                if index >= 2 and step.criterion <= previous_value:
+                    configuration.update(previous_q)  # the last step undone
+                    step_norms.pop()
+                    step = previous_step
+                    break
+                previous_q, previous_value, previous_step = configuration.q.copy(), step.criterion, taken
             q = configuration.integrate(step.dq)
             if self.limits is not None:
                 q = self.limits.clamp(q)

@@ -38,6 +38,7 @@ from ibik_pin.solvers.base import (
     Solver,
     StepResult,
     build_levels,
+    climbed_value,
     report_levels,
 )
 from ibik_pin.solvers.level_loop import PackedLevels
@@ -127,7 +128,7 @@ class HierarchicalQPSolver(Solver):
                     null_basis = null_basis @ remaining
             start = stopped + 1
         packed.finish()
-        return StepResult(dq, functools.partial(report_levels, built, dq.copy(), failed))
+        return StepResult(dq, functools.partial(report_levels, built, dq.copy(), failed), climbed_value(built))
 
     def _solve_level(self, index, hessian, linear, constraint, lower, upper) -> np.ndarray | None:
         """proxsuite solve of min 1/2 w'Hw + g'w s.t. lower <= C w <= upper; None if it failed.

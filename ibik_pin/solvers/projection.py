@@ -27,6 +27,7 @@ from ibik_pin.solvers.base import (
     Solver,
     StepResult,
     build_levels,
+    climbed_value,
     report_levels,
 )
 from ibik_pin.solvers.level_loop import PackedLevels
@@ -62,7 +63,7 @@ class PriorityStackSolver(Solver):
                 locked |= leaving
             dq = np.clip(dq, lower, upper)
         packed.finish()
-        return StepResult(dq, functools.partial(report_levels, built, dq.copy()))
+        return StepResult(dq, functools.partial(report_levels, built, dq.copy()), climbed_value(built))
 
     def _project(self, packed: PackedLevels, dq: np.ndarray, null_basis: np.ndarray) -> np.ndarray:
         """The recursive stack from a partial step dq over the coordinates spanned by null_basis."""

@@ -19,53 +19,11 @@ import numpy as np
 
 from ibik_pin.io.files import json_ready, strict_json, write_text_atomically
 from ibik_pin.tracking.axes import AXES_DESCRIPTIONS, AxesChoice
+from ibik_pin.tracking.report_units import FRAME_NUMBERING, UNITS
 from ibik_pin.tracking.result import TrackingResult
 from ibik_pin.tracking.tracker import TrackingSettings
 from ibik_pin.tracking.video_inputs import SilhouetteQuality, TriangulationReport
 from ibik_pin.vision.extrinsics_refit import ExtrinsicsRefit
-
-FRAME_NUMBERING = (
-    "frame keys are the targets TRC's Frame# (the first row of a Pose2Sim/OpenSim TRC is frame 1); "
-    "per_frame lists hold one value per TRC row, in file order"
-)
-
-
-#: report.json's "units": the unit and meaning of every figure the report holds.
-UNITS = {
-    "frame_numbers": "the TRC's Frame# (counted from 1, as the TRC counts); keys of the frame dictionaries too",
-    "frame_rate_hz": "Hz: the targets TRC's DataRate",
-    "times_s": "s: the targets TRC's Time column",
-    "solve_seconds": "s: wall time of the solves alone (no reading or writing)",
-    "solve_frames_per_second": "frames per second of solve_seconds",
-    "loop_seconds": ("s: wall time of the whole frame loop: the solves, reading the silhouettes, building the "
-                     "support images and medial axes (one frame ahead, in a second thread), each frame's checks"),
-    "frames_per_second": "frames per second of loop_seconds",
-    "iterations_per_frame": "solver steps per frame after the first",
-    "mean_iterations_per_frame": "solver steps of a frame's main solve, mean over the frames after the first",
-    "step_tolerance": "rad: the step norm under which a frame's main solve stops (null: never early)",
-    "mask_filter_radius": "frames on each side of the temporal majority filter",
-    "end_effector_residual_m": "m: per frame, the mean distance of the present targets to the model's keypoints",
-    "keypoint_residual_m": "m: per target keypoint, the distance of the model's keypoint to its target",
-    "overlap_per_view": ("px: the paper's image criterion h (eq. 5-6) at each frame's solution, the mean over "
-                         "the skeleton's sample points of the silhouette's capped signed distance (positive "
-                         "inside, capped at about a limb's half-width; negative outside); higher is better; "
-                         "not a 0-1 overlap: see inside_fraction_per_view"),
-    "inside_fraction_per_view": "0-1: the fraction of the skeleton's sample points that project inside the silhouette",
-    "trc_axes.inside_images": "0-1",
-    "trc_axes.inside_silhouettes": "0-1",
-    "trc_axes.upright_cosine": "-1 to 1",
-    "silhouettes": "null without silhouettes; otherwise the silhouettes.* entries",
-    "triangulation": "null when --targets were given; otherwise the triangulation.* entries",
-    "silhouettes.targets_inside_per_view": "0-1: per frame, the share of the projected targets inside the silhouette",
-    "silhouettes.mask_area_per_view": "px: per frame, the silhouette's area",
-    "triangulation.reprojection_median_m": "m: reprojection error at the point's depth, median over the frames",
-    "triangulation.landmarks_used_per_view": "0-1",
-    "extrinsics": ("null unless MediaPipe's landmarks from three cameras or more were checked against each other; "
-                   "the cameras turned by --refit-cameras are written to calibration_refitted.toml"),
-    "extrinsics.reprojection_px": ("px: per camera, median distance from its detections to the landmarks the other "
-                                   "views triangulate, projected, as calibrated; reprojection_after_px: re-fitted"),
-    "extrinsics.turn_deg": "deg: how far each re-fitted camera turned about its centre",
-}
 
 
 def _finite_or_none(value: float | np.floating) -> float | None:
@@ -224,8 +182,9 @@ class TrackingReport:
         criterion: the image criterion ("paper" or "two-way").
         iterations_per_frame: solver steps per frame after the first.
         mean_iterations_per_frame: steps the main solves took, mean over the frames after the
-            first (below iterations_per_frame when step_tolerance stops them early).
+            first (below iterations_per_frame when image_stop or step_tolerance ends them early).
         step_tolerance: the settings' step_tolerance [rad], or None.
+        image_stop: the settings' image_stop ("peak" or "count").
         mask_filter_radius: temporal majority filter radius of the silhouettes [frames].
         solve_frames_per_second: frames solved per second of solver time [Hz]; None if unmeasured.
         frames_per_second: frames per second of the whole frame loop, silhouettes read and support
@@ -285,6 +244,7 @@ class TrackingReport:
     frames_with_outlier_targets: dict[str, list[str]] = field(default_factory=dict)
     mean_iterations_per_frame: float | None = None
     step_tolerance: float | None = None
+    image_stop: str | None = None
     silhouettes: SilhouetteQuality | None = None
     triangulation: TriangulationReport | None = None
     extrinsics: ExtrinsicsRefit | None = None
@@ -352,6 +312,7 @@ class TrackingReport:
             mean_iterations_per_frame=(float(np.mean(result.iterations[1:])) if len(result.iterations) > 1
                                        else None),
             step_tolerance=settings.step_tolerance,
+            image_stop=settings.image_stop,
             frames_with_outlier_targets={} if outliers is None else by_frame(
                 [[name for name, out in zip(result.target_names, row, strict=True) if out] for row in outliers]),
         )
@@ -397,4 +358,4 @@ class TrackingReport:
         return lines
 
 
-__all__ = ["FRAME_NUMBERING", "UNITS", "ResidualStats", "SolverLevelsReport", "TrackingReport", "TrcAxesReport"]
+__all__ = ["ResidualStats", "SolverLevelsReport", "TrackingReport", "TrcAxesReport"]
