@@ -20,12 +20,11 @@ from types import TracebackType
 
 import numpy as np
 
-from ibik_pin.checks import as_mask
 from ibik_pin.exceptions import InputError
 from ibik_pin.tasks import View
 from ibik_pin.tasks.silhouette_axis import AxisView
 from ibik_pin.vision.camera import CameraLike
-from ibik_pin.vision.distance import inside_distance
+from ibik_pin.vision.distance import inside_distance, scan_mask
 from ibik_pin.vision.medial_axis import medial_axis_pixels
 from ibik_pin.vision.support import SupportImage, support_from_mask
 
@@ -60,16 +59,20 @@ def frame_images(source: Callable[[int], Sequence[np.ndarray]], cameras: Sequenc
         raise InputError(f"expected one silhouette per camera ({len(cameras)}), got {len(masks)}")
     views, axes, disabled = [], [], []
     for index, (camera, mask) in enumerate(zip(cameras, masks, strict=True)):
-        mask = as_mask(mask)
-        if not mask.any():
+        # Each whole-image numpy call here would be a point where this thread, working beside the
+        # solver, gives up the GIL and takes it back, and each such handover stalls the solver:
+        # measured, 30 handovers a frame slowed its steps by a third. So the silhouette is read in
+        # a few compiled calls: one scan, one inside and one outside distance transform.
+        scanned = scan_mask(mask)
+        if scanned.box is None:
             disabled.append(camera.name)
-            views.append(View(camera, SupportImage(np.zeros(mask.shape, np.float32), enabled=False)))
+            views.append(View(camera, SupportImage(np.zeros(scanned.mask.shape, np.float32), enabled=False)))
             axes.append(np.zeros((0, 2)))
             continue
-        inside = inside_distance(mask)
-        views.append(View(camera, support_from_mask(mask, inside_cap_px=caps[index], inside=inside)))
+        inside = inside_distance(scanned.mask, scanned.box)
+        views.append(View(camera, support_from_mask(scanned, inside_cap_px=caps[index], inside=inside)))
         if axis_scales is not None:
-            axes.append(medial_axis_pixels(mask, inside=inside))
+            axes.append(medial_axis_pixels(scanned.mask, inside=inside))
     axis_views = (None if axis_scales is None else
                   [AxisView(camera, pixels, scale) for camera, pixels, scale in zip(cameras, axes, axis_scales,
                                                                                      strict=True)])

@@ -12,10 +12,11 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from ibik_pin.checks import as_mask
 from ibik_pin.exceptions import InputError
 
-__all__ = ["InsideDistance", "box_around", "distance_to_background", "grown", "inside_distance", "shifted",
-           "signed_distance"]
+__all__ = ["InsideDistance", "ScannedMask", "box_around", "distance_to_background", "grown", "inside_distance",
+           "scan_mask", "shifted", "signed_distance"]
 
 
 class InsideDistance(NamedTuple):
@@ -32,21 +33,84 @@ class InsideDistance(NamedTuple):
     silhouette_box: tuple[slice, slice]
 
 
+class ScannedMask(NamedTuple):
+    """A silhouette read once: what the support image and the medial axis ask of it first.
+
+    Attributes:
+        mask: (H, W) bool copy of the silhouette (non-zero = set).
+        set_pixels: number of set pixels.
+        box: (rows, columns) bounding box of the set pixels; None when there is none.
+    """
+
+    mask: np.ndarray
+    set_pixels: int
+    box: tuple[slice, slice] | None
+
+
+def scan_mask(mask: np.ndarray) -> ScannedMask:
+    """A 2D bool or uint8 mask's bool copy, its count of set pixels and their bounding box, in one
+    compiled pass (as_mask's copy, any(), all() and box_around() each read the whole frame, and
+    each numpy call is a point where a thread working beside the solver gives up and takes back
+    the GIL: ibik_pin.tracking.frame_images).
+
+    Raises:
+        InputError: as checks.as_mask.
+    """
+    if not isinstance(mask, np.ndarray) or mask.dtype not in (np.bool_, np.uint8):
+        as_mask(mask)  # raises its error
+    if mask.ndim != 2 or mask.shape[0] < 1 or mask.shape[1] < 1:
+        as_mask(mask)
+    copy, count, row_start, row_stop, column_start, column_stop = _scan(mask.view(np.uint8))
+    box = (slice(row_start, row_stop), slice(column_start, column_stop)) if count else None
+    return ScannedMask(copy, int(count), box)
+
+
+@njit(cache=True, nogil=True)
+def _scan(mask):
+    """(bool copy, count of set pixels, first and past-last row and column of the set pixels)."""
+    height, width = mask.shape
+    copy = np.empty((height, width), np.bool_)
+    columns = np.zeros(width, np.uint8)
+    count, row_start, row_stop = 0, height, 0
+    for i in range(height):
+        in_row = 0
+        for j in range(width):
+            is_set = mask[i, j] != 0
+            copy[i, j] = is_set
+            columns[j] |= is_set
+            in_row += is_set
+        if in_row:
+            count += in_row
+            row_start = min(row_start, i)
+            row_stop = i + 1
+    column_start, column_stop = width, 0
+    for j in range(width):
+        if columns[j]:
+            column_start = min(column_start, j)
+            column_stop = j + 1
+    if count == 0:
+        return copy, 0, 0, 0, 0, 0
+    return copy, count, row_start, row_stop, column_start, column_stop
+
+
 def inside_distance(mask: np.ndarray, box: tuple[slice, slice] | None = None) -> InsideDistance:
     """The distance to the background of a non-empty (H, W) bool mask on its bounding box grown by
     one pixel (`box`: that bounding box if known, box_around(mask)); what both the support image
     and the medial axis read, computed once for them."""
     box = box_around(mask) if box is None else box
     grown_box = grown(box, 1, mask.shape)
-    return InsideDistance(distance_to_background(mask[grown_box].view(np.uint8)), grown_box, box)
+    # The compiled transform reads the strided view: no contiguous copy first.
+    return InsideDistance(_distances(mask[grown_box].view(np.uint8), False), grown_box, box)
 
 
 def signed_distance(mask: np.ndarray, region: tuple[slice, slice] | None = None,
-                    box: tuple[slice, slice] | None = None, inside: InsideDistance | None = None) -> np.ndarray:
+                    box: tuple[slice, slice] | None = None, inside: InsideDistance | None = None,
+                    inside_cap_px: float | None = None) -> np.ndarray:
     """(h, w) float32 signed Euclidean distance [px] to the mask's border, positive inside, on
     `region` of the frame: a box that holds the silhouette's bounding box grown by one pixel (None:
     the whole frame). `box`: that bounding box if known (box_around(mask)); `inside`: the mask's
-    inside_distance if known.
+    inside_distance if known; `inside_cap_px`: the inside distances capped there (a positive
+    number of pixels; None: no cap).
 
     The border is taken halfway between a set and an unset pixel, hence the 0.5 shifts: the
     distance then grows by 1 px per pixel across the border as well. The image edge is no
@@ -60,12 +124,33 @@ def signed_distance(mask: np.ndarray, region: tuple[slice, slice] | None = None,
     # the whole frame's there too: every set pixel, so the nearest, lies within the region.
     if inside is None:
         inside = inside_distance(mask, box)
-    box = inside.box
-    values = _distances(_as_uint8(mask[region]), True)
-    np.subtract(np.float32(0.5), values, out=values)  # outside: 0.5 - distance
-    box_in_region = shifted(box, region)
-    # copyto, not where: numpy's where on these strided views is ten times slower.
-    np.copyto(values[box_in_region], inside.values - np.float32(0.5), where=mask[box])
+    rows, columns = shifted(inside.box, region)
+    pixels = mask.view(np.uint8) if mask.dtype == np.bool_ else _as_uint8(mask)
+    # One compiled call for the outside transform, the inside values and the cap: a thread that
+    # builds supports beside the solver then gives up the GIL once here, not at five numpy calls.
+    return _signed(pixels[region], inside.values, rows.start, columns.start, pixels[inside.box],
+                   np.nan if inside_cap_px is None else float(inside_cap_px))
+
+
+@njit(cache=True, nogil=True)
+def _signed(region, inside, row, column, inside_pixels, cap):
+    """0.5 - the distance to the set pixels over `region` (h, w); on the set pixels of the box
+    (`inside_pixels`, at (row, column) of the region), inside - 0.5, at most `cap` (NaN: no cap).
+    The same float32 arithmetic as numpy's on the arrays."""
+    values = _distances(region, True)
+    half = np.float32(0.5)
+    height, width = values.shape
+    for i in range(height):
+        for j in range(width):
+            values[i, j] = half - values[i, j]
+    capped = not np.isnan(cap)
+    limit = np.float32(cap) if capped else np.float32(0.0)
+    rows, columns = inside.shape
+    for i in range(rows):
+        for j in range(columns):
+            if inside_pixels[i, j] != 0:
+                value = inside[i, j] - half
+                values[row + i, column + j] = min(value, limit) if capped else value
     return values
 
 

@@ -21,7 +21,14 @@ import numpy as np
 
 from ibik_pin.checks import as_mask
 from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
-from ibik_pin.vision.distance import InsideDistance, inside_distance, shifted, signed_distance
+from ibik_pin.vision.distance import (
+    InsideDistance,
+    ScannedMask,
+    inside_distance,
+    scan_mask,
+    shifted,
+    signed_distance,
+)
 from ibik_pin.vision.kernels import support_sample
 
 
@@ -203,7 +210,7 @@ def _smooth(values: np.ndarray, sigma_px: float) -> np.ndarray:
 
 
 def support_from_mask(
-    mask: np.ndarray,
+    mask: np.ndarray | ScannedMask,
     inside_cap_px: float | None = 6.0,
     outside_cap_px: float | None = None,
     smooth_sigma_px: float = 1.0,
@@ -217,7 +224,7 @@ def support_from_mask(
     so that a segment lying outside is pulled in. Then a light Gaussian blur.
 
     Args:
-        mask: (H, W) bool or uint8 silhouette, non-zero = person.
+        mask: (H, W) bool or uint8 silhouette, non-zero = person; or its vision.distance.ScannedMask.
         inside_cap_px: cap of the inside distance [px]; None for no cap.
         outside_cap_px: truncation of the outside distance [px]; None for none.
         smooth_sigma_px: standard deviation of the Gaussian blur [px]; 0 for none.
@@ -230,13 +237,14 @@ def support_from_mask(
     Raises:
         InputError: the mask is not a 2D bool/uint8 array, or a parameter is out of range.
     """
-    mask = as_mask(mask)
+    scanned = mask if isinstance(mask, ScannedMask) else scan_mask(mask)
+    mask = scanned.mask
     inside_cap_px = _positive_or_none(inside_cap_px, "inside_cap_px")
     outside_cap_px = _positive_or_none(outside_cap_px, "outside_cap_px")
     smooth_sigma_px = float(smooth_sigma_px)
     if not np.isfinite(smooth_sigma_px) or smooth_sigma_px < 0.0:
         raise InputError(f"smooth_sigma_px: expected a non-negative number of pixels, found {smooth_sigma_px}")
-    if not mask.any():
+    if scanned.set_pixels == 0:
         warnings.warn(
             f"mask: the silhouette of size (w, h) = {(mask.shape[1], mask.shape[0])} is empty; "
             "the image term is disabled for this view",
@@ -244,12 +252,12 @@ def support_from_mask(
             stacklevel=2,
         )
         return SupportImage(np.zeros(mask.shape, np.float32), enabled=False)
-    if mask.all():
+    if scanned.set_pixels == mask.size:
         # No border in the image: every pixel is deep inside.
         inside_value = inside_cap_px if inside_cap_px is not None else float(max(mask.shape))
         return SupportImage(np.full(mask.shape, inside_value, np.float32))
     if inside is None:
-        inside = inside_distance(mask)
+        inside = inside_distance(mask, scanned.box)
     box = inside.silhouette_box
     support_values = functools.partial(_support_values, mask, box=box, inside=inside, inside_cap_px=inside_cap_px,
                                        outside_cap_px=outside_cap_px, smooth_sigma_px=smooth_sigma_px)
@@ -266,13 +274,8 @@ def _support_values(mask: np.ndarray, region: tuple[slice, slice] | None, box: t
                     inside: InsideDistance, inside_cap_px: float | None, outside_cap_px: float | None,
                     smooth_sigma_px: float) -> np.ndarray:
     """support_from_mask's values on a region holding the silhouette's box (None: the whole frame), (h, w)."""
-    values = signed_distance(mask, region, box, inside)
-    if region is None:
-        region = (slice(0, mask.shape[0]), slice(0, mask.shape[1]))
-    if inside_cap_px is not None:
-        # Only the box can exceed a positive cap: outside it every value is a negative distance.
-        capped = shifted(box, region)
-        np.minimum(values[capped], inside_cap_px, out=values[capped])
+    # Only the box can exceed a positive cap: outside it every value is a negative distance.
+    values = signed_distance(mask, region, box, inside, inside_cap_px)
     if outside_cap_px is not None:
         np.maximum(values, -outside_cap_px, out=values)
     return _smooth(values, smooth_sigma_px)
