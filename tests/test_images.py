@@ -1,9 +1,7 @@
 """Tests of ibik_pin.images: support images and their interpolation, masks, videos, silhouettes."""
 
 import itertools
-import struct
 import warnings
-import zlib
 from pathlib import Path
 
 import cv2
@@ -11,7 +9,7 @@ import numpy as np
 import pytest
 
 from ibik_pin.exceptions import EmptySilhouetteWarning, FileFormatError, InputError
-from ibik_pin.io.masks import decodes_silently, list_mask_files, read_mask
+from ibik_pin.io.masks import list_mask_files, read_mask
 from ibik_pin.io.video import VideoReader
 from ibik_pin.vision.segmentation import TemporalMajority, silhouettes_from_video
 from ibik_pin.vision.support import SupportImage, obstacle_support, support_from_mask
@@ -212,30 +210,6 @@ def test_read_mask_reports_an_unreadable_or_missing_image(tmp_path):
         read_mask(tmp_path / "fake.png")
     with pytest.raises(FileFormatError, match=r"absent\.png': expected a readable image, found no such file"):
         read_mask(tmp_path / "absent.png")
-
-
-def _png_with_a_bad_colour_profile(path: Path, mask: np.ndarray) -> None:
-    """A PNG that libpng decodes with a warning: an iCCP chunk whose profile is not one."""
-    data = cv2.imencode(".png", mask)[1].tobytes()
-    body = b"icc\x00\x00" + zlib.compress(b"not a colour profile")
-    chunk = struct.pack(">I", len(body)) + b"iCCP" + body + struct.pack(">I", zlib.crc32(b"iCCP" + body))
-    after_header = 8 + 4 + 4 + 13 + 4  # signature, then IHDR's length, type, data and CRC
-    path.write_bytes(data[:after_header] + chunk + data[after_header:])
-
-
-def test_a_quiet_decoder_reads_the_same_mask_and_still_quotes_a_failed_decode(tmp_path, capfd):
-    mask = disc_mask((40, 30), (20, 15), 8)
-    cv2.imwrite(str(tmp_path / "plain.png"), mask.astype(np.uint8) * 255)
-    _png_with_a_bad_colour_profile(tmp_path / "warns.png", mask.astype(np.uint8) * 255)
-    (tmp_path / "fake.png").write_text("not an image")
-    assert decodes_silently(tmp_path / "plain.png")
-    assert not decodes_silently(tmp_path / "warns.png") and not decodes_silently(tmp_path / "fake.png")
-    capfd.readouterr()
-    np.testing.assert_array_equal(read_mask(tmp_path / "plain.png", quiet_decoder=True), mask)
-    np.testing.assert_array_equal(read_mask(tmp_path / "warns.png"), mask)  # its warning caught
-    assert capfd.readouterr().err == ""
-    with pytest.raises(FileFormatError, match=r"fake\.png': expected a readable image, OpenCV cannot decode it"):
-        read_mask(tmp_path / "fake.png", quiet_decoder=True)
 
 
 def test_list_mask_files_sorts_image_files_by_name_with_numbers_as_numbers(tmp_path):

@@ -6,7 +6,6 @@ the model and rendered into 2 calibrated cameras, read back from the files `ibik
 
 from __future__ import annotations
 
-import dataclasses
 import textwrap
 from pathlib import Path
 
@@ -243,13 +242,3 @@ def test_a_centre_of_mass_level_brings_the_centre_of_mass_over_the_feet(walk):
     assert np.isfinite(free.target_distances).all()  # the targets no level names are still measured
     assert com_error(balanced.q) < 1e-3 < com_error(free.q)
     assert np.nanmax(balanced.target_distances[:, [walk.names.index("LAnkle"), walk.names.index("RAnkle")]]) < 1e-3
-
-
-def test_mask_folders_whose_first_file_decodes_silently_are_read_without_catching_stderr(walk, tmp_path):
-    """load_silhouettes decodes each camera's first mask under a stderr catch once: silent there,
-    the camera's masks are read without one (io.masks.read_image); the masks are the same."""
-    assert walk.silhouettes.quiet_decoders == [True] * len(walk.cameras)
-    loud = dataclasses.replace(walk.silhouettes, quiet_decoders=[False] * len(walk.cameras))
-    for frame in (0, FRAMES - 1):
-        for quiet, caught in zip(walk.silhouettes.frame(frame), loud.frame(frame), strict=True):
-            np.testing.assert_array_equal(quiet, caught)

@@ -12,27 +12,19 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from numba import njit
 
 from ibik_pin.exceptions import FileFormatError, InputError
 from ibik_pin.io.files import PathLike
 from ibik_pin.io.native_output import captured_native_stderr
 
-__all__ = ["IMAGE_SUFFIXES", "decodes_silently", "list_mask_files", "read_image", "read_mask"]
+__all__ = ["IMAGE_SUFFIXES", "list_mask_files", "read_image", "read_mask"]
 
 #: The file suffixes read as images (any case).
 IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"})
 
 
-def read_image(path: Path, flags: int, what: str, quiet_decoder: bool = False) -> np.ndarray:
+def read_image(path: Path, flags: int, what: str) -> np.ndarray:
     """An image file decoded by OpenCV, what its decoder prints to stderr quoted in the error.
-
-    `quiet_decoder`: the files of this source decode without a word (decodes_silently on one of
-    them), so the decoder's stderr is caught only when a decode fails, to quote it. Catching it
-    means pointing the process's file descriptor 2 elsewhere for the decode: in a thread that
-    reads ahead of the solver, that would also swallow what the main thread prints meanwhile, and
-    its half-dozen system calls each hand the GIL over (ibik_pin.tracking.frame_images). A file that
-    then fails to decode may have the decoder's own line printed before the error.
 
     Raises:
         FileFormatError: naming `what` ("mask", "background"), when the file is missing or cannot be
@@ -41,10 +33,6 @@ def read_image(path: Path, flags: int, what: str, quiet_decoder: bool = False) -
     if not path.is_file():
         raise FileFormatError(f"{what} file '{path}': expected a readable image, found "
                               + ("no such file" if not path.exists() else "not a regular file"))
-    if quiet_decoder:
-        image = cv2.imread(str(path), flags)
-        if image is not None:
-            return image
     with captured_native_stderr() as decoder:
         image = cv2.imread(str(path), flags)
     if image is None:
@@ -53,15 +41,7 @@ def read_image(path: Path, flags: int, what: str, quiet_decoder: bool = False) -
     return image
 
 
-def decodes_silently(path: Path) -> bool:
-    """Whether OpenCV decodes the image file and its decoder prints nothing (libpng warns on, for
-    example, a colour profile it finds wrong: a folder of such files would print a line a frame)."""
-    with captured_native_stderr() as decoder:
-        image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    return image is not None and not decoder.text.strip()
-
-
-def read_mask(path: PathLike, expected_size: tuple[int, int] | None = None, quiet_decoder: bool = False) -> np.ndarray:
+def read_mask(path: PathLike, expected_size: tuple[int, int] | None = None) -> np.ndarray:
     """A silhouette mask from an image file.
 
     The image is read as grey levels; a 0/255 mask (also after JPEG compression) is thresholded
@@ -70,7 +50,6 @@ def read_mask(path: PathLike, expected_size: tuple[int, int] | None = None, quie
     Args:
         path: image file (png, jpg, bmp, tif, ...).
         expected_size: (width, height) [px] the mask must have, or None.
-        quiet_decoder: see read_image.
 
     Returns:
         (H, W) bool mask, True = person.
@@ -80,24 +59,13 @@ def read_mask(path: PathLike, expected_size: tuple[int, int] | None = None, quie
         InputError: the size differs from ``expected_size``.
     """
     path = Path(path)
-    image = read_image(path, cv2.IMREAD_GRAYSCALE, "mask", quiet_decoder)
+    image = read_image(path, cv2.IMREAD_GRAYSCALE, "mask")
     found = (image.shape[1], image.shape[0])
     if expected_size is not None and tuple(int(s) for s in expected_size) != found:
         raise InputError(
             f"mask file '{path}': expected size (w, h) = {tuple(int(s) for s in expected_size)}, found (w, h) = {found}"
         )
-    return _thresholded(image)
-
-
-@njit(cache=True, nogil=True)
-def _thresholded(image):
-    """image > 127 when some pixel exceeds 127, else image > 0: one compiled call for numpy's two
-    passes (a mask read beside the solver gives up the GIL once, not twice)."""
-    threshold = 0
-    for value in image.ravel():
-        if value > 127:
-            threshold = 127
-            break
+    threshold = 127 if image.max() > 127 else 0
     return image > threshold
 
 

@@ -5,7 +5,7 @@ targets' frame count before any solving."""
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -13,7 +13,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ibik_pin.exceptions import FileFormatError, IbikWarning, InputError
-from ibik_pin.io.masks import IMAGE_SUFFIXES, decodes_silently, list_mask_files, read_mask
+from ibik_pin.io.masks import IMAGE_SUFFIXES, list_mask_files, read_mask
 from ibik_pin.io.video import VideoReader
 from ibik_pin.vision.mask_store import CroppedMasks
 from ibik_pin.vision.segmentation import silhouettes_from_video
@@ -32,13 +32,11 @@ CODEC_ALIGNMENT_PX = 16
 
 @dataclass
 class Silhouettes:
-    """Per camera, either mask files (read lazily) or decoded video silhouettes; `quiet_decoders`:
-    per camera, whether its first mask file decoded without a word (io.masks.read_image)."""
+    """Per camera, either mask files (read lazily) or decoded video silhouettes."""
 
     mask_files: list[list[Path]] | None
     video_masks: list[CroppedMasks] | None
     sizes: list[tuple[int, int]]
-    quiet_decoders: list[bool] = field(default_factory=list)
 
     @property
     def frame_count(self) -> int:
@@ -48,8 +46,7 @@ class Silhouettes:
     def mask(self, index: int, camera: int) -> np.ndarray:
         """Frame `index`'s (H, W) bool silhouette in camera number `camera`."""
         if self.mask_files is not None:
-            quiet = camera < len(self.quiet_decoders) and self.quiet_decoders[camera]
-            return read_mask(self.mask_files[camera][index], self.sizes[camera], quiet)
+            return read_mask(self.mask_files[camera][index], self.sizes[camera])
         if self.video_masks is None:
             raise InputError("silhouettes: neither mask files nor video masks were loaded")
         return self.video_masks[camera][index]
@@ -131,7 +128,7 @@ def load_silhouettes(job: TrackJob, cameras: list, frame_count: int, progress: b
                 raise InputError(f"--masks {folders[name]}: {len(listed)} masks for camera {name!r} "
                                  f"but the targets have {frame_count} frames")
             read_mask(listed[0], size)  # size and readability, before any solving
-        return Silhouettes(files, None, sizes, [decodes_silently(listed[0]) for listed in files])
+        return Silhouettes(files, None, sizes)
     if job.videos is None:
         raise InputError("the image criterion needs --masks or --videos (or pass --no-image)")
     videos = camera_folder_entries(job.videos, names, "videos")
