@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from ibik_pin.exceptions import InputError
-from ibik_pin.vision.distance import distance_to_background, signed_distance
+from ibik_pin.vision.distance import box_around, distance_to_background, scan_mask, signed_distance
 from ibik_pin.vision.medial_axis import medial_axis_pixels
 from ibik_pin.vision.support import SupportImage, support_from_mask
 
@@ -37,6 +37,36 @@ def test_the_signed_distance_from_the_bounding_box_equals_the_whole_frames():
     assert len(masks) > 100
     for mask in masks:
         assert np.array_equal(signed_distance(mask.astype(bool)), whole_framesigned_distance(mask))
+
+
+def test_the_signed_distance_capped_in_its_compiled_call_equals_numpys_cap_of_the_whole_frame():
+    for mask in random_silhouettes(seed=8, count=60):
+        expected = whole_framesigned_distance(mask)
+        np.minimum(expected, np.float32(2.5), out=expected)
+        assert np.array_equal(signed_distance(mask.astype(bool), inside_cap_px=2.5), expected)
+        assert np.array_equal(signed_distance(mask, inside_cap_px=2.5), expected)  # uint8 0/1 as well
+
+
+@pytest.mark.parametrize("dtype", [np.bool_, np.uint8])
+def test_a_scanned_mask_is_the_masks_copy_its_count_and_its_bounding_box(dtype):
+    rng = np.random.default_rng(9)
+    masks = [mask * np.uint8(rng.integers(1, 256)) for mask in random_silhouettes(seed=9, count=40)]
+    masks += [np.zeros((7, 5), np.uint8), np.ones((3, 4), np.uint8), np.eye(6, 9, 2, dtype=np.uint8)]
+    for mask in masks:
+        mask = (mask != 0) if dtype == np.bool_ else mask
+        strided = mask[::2, 1::3]  # a view that is not contiguous
+        for image in (mask, strided):
+            scanned = scan_mask(image)
+            assert np.array_equal(scanned.mask, image != 0) and scanned.mask.dtype == np.bool_
+            assert scanned.mask is not image and not np.shares_memory(scanned.mask, image)
+            assert scanned.set_pixels == np.count_nonzero(image)
+            assert scanned.box == (box_around(image != 0) if image.any() else None)
+
+
+def test_scanning_refuses_what_as_mask_refuses():
+    for bad in ([[1, 0]], np.zeros((2, 2), np.float32), np.zeros(4, np.uint8), np.zeros((0, 3), np.bool_)):
+        with pytest.raises(InputError):
+            scan_mask(bad)
 
 
 def test_the_exact_distance_does_not_depend_on_the_part_of_the_image_transformed():
