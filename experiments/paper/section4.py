@@ -301,10 +301,11 @@ def run_full_body(
     targets = clip.keypoints[:, indices] + rng.normal(0.0, target_noise_mm / 1000.0, (len(clip.q), len(names), 3))
     use_image = method == "ibik"
     solver_name = {"ik": "ik", "pik": "stack"}.get(method, scheme)
-    # The paper's method as published: its criterion, no swivel search, every target an end effector.
+    # The paper's method as published: its criterion, no swivel search, every target an end effector,
+    # its fixed count of steps per frame.
     settings = TrackingSettings(method=solver_name, iterations=iterations, use_image=use_image,
                                 criterion="paper", swivel_search=False, feet_by_ankle=False,
-                                image_moves="all")
+                                image_moves="all", image_stop="count")
     tracker = Tracker(clip.body, views.cameras if (use_image and views) else [], settings)
     result = tracker.track(names, targets, (lambda frame: views.masks[frame]) if use_image else None)
     estimated = [result.keypoint_names.index(name) for name in ESTIMATED]
