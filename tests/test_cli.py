@@ -102,6 +102,15 @@ def test_the_mask_filter_runs_and_is_reported(dataset, tmp_path):
     assert report["end_effector_residual_m"]["mean"] < 0.01
 
 
+def test_the_image_stop_is_taken_from_the_command_line_and_reported(dataset, runs, tmp_path):
+    folder, _ = runs
+    peaked = json.loads((folder / "ibik" / "report.json").read_text())
+    assert peaked["image_stop"] == "peak" and peaked["mean_iterations_per_frame"] < 15
+    assert main(track_arguments(dataset, tmp_path / "counted", "--image-stop", "count")) == 0
+    counted = json.loads((tmp_path / "counted" / "report.json").read_text())
+    assert counted["image_stop"] == "count" and counted["mean_iterations_per_frame"] == 15
+
+
 def test_the_overlay_video_decodes_to_one_frame_per_input_frame(runs):
     folder, _ = runs
     capture = cv2.VideoCapture(str(folder / "ibik" / "overlay_cam1.mp4"))

@@ -94,9 +94,9 @@ class TrackingSettings:
         image_stop: where a frame's image steps end. "peak" (default): once the image criterion
             no longer rises from one step to the next, back at the best of the two, or after
             `iterations` steps (Solver.solve's stop_at_peak); "count": always `iterations` steps,
-            as in the paper. On the real-motion benchmark (2 views) "peak" took 6 steps a frame
-            instead of 15, and all four elbows and knees went 12.2 -> 11.7 mm; on the real video
-            (experiments/pose2sim_video.py) it kept climbing where the criterion still rose.
+            as in the paper. On the real-motion benchmark (2 views) "peak" took 4.7-8.0 steps a
+            frame instead of 15, and all four elbows and knees went 12.2 -> 11.7 mm; on the real
+            video (experiments/pose2sim_video.py) it kept climbing where the criterion still rose.
         stack: the priority levels and their tasks (tracking.stack); None: Stack.default(). An
             image task's criterion, step and views, when the stack gives them, replace
             `criterion`, `image_step` and the cameras; a posture task's weight `posture_weight`.
