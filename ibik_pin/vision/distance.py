@@ -56,10 +56,9 @@ def scan_mask(mask: np.ndarray) -> ScannedMask:
     Raises:
         InputError: as checks.as_mask.
     """
-    if not isinstance(mask, np.ndarray) or mask.dtype not in (np.bool_, np.uint8):
+    if (not isinstance(mask, np.ndarray) or mask.dtype not in (np.bool_, np.uint8) or mask.ndim != 2
+            or 0 in mask.shape):
         as_mask(mask)  # raises its error
-    if mask.ndim != 2 or mask.shape[0] < 1 or mask.shape[1] < 1:
-        as_mask(mask)
     copy, count, row_start, row_stop, column_start, column_stop = _scan(mask.view(np.uint8))
     box = (slice(row_start, row_stop), slice(column_start, column_stop)) if count else None
     return ScannedMask(copy, int(count), box)

@@ -258,10 +258,9 @@ def support_from_mask(
         return SupportImage(np.full(mask.shape, inside_value, np.float32))
     if inside is None:
         inside = inside_distance(mask, scanned.box)
-    box = inside.silhouette_box
-    support_values = functools.partial(_support_values, mask, box=box, inside=inside, inside_cap_px=inside_cap_px,
+    support_values = functools.partial(_support_values, mask, inside=inside, inside_cap_px=inside_cap_px,
                                        outside_cap_px=outside_cap_px, smooth_sigma_px=smooth_sigma_px)
-    window = _window_around(box, mask.shape, smooth_sigma_px)
+    window = _window_around(inside.silhouette_box, mask.shape, smooth_sigma_px)
     if window is None:
         return SupportImage(support_values(None))
     region, valid = window
@@ -270,12 +269,10 @@ def support_from_mask(
                                   functools.partial(support_values, None))
 
 
-def _support_values(mask: np.ndarray, region: tuple[slice, slice] | None, box: tuple[slice, slice],
-                    inside: InsideDistance, inside_cap_px: float | None, outside_cap_px: float | None,
-                    smooth_sigma_px: float) -> np.ndarray:
+def _support_values(mask: np.ndarray, region: tuple[slice, slice] | None, inside: InsideDistance,
+                    inside_cap_px: float | None, outside_cap_px: float | None, smooth_sigma_px: float) -> np.ndarray:
     """support_from_mask's values on a region holding the silhouette's box (None: the whole frame), (h, w)."""
-    # Only the box can exceed a positive cap: outside it every value is a negative distance.
-    values = signed_distance(mask, region, box, inside, inside_cap_px)
+    values = signed_distance(mask, region, inside=inside, inside_cap_px=inside_cap_px)
     if outside_cap_px is not None:
         np.maximum(values, -outside_cap_px, out=values)
     return _smooth(values, smooth_sigma_px)
