@@ -16,6 +16,7 @@ import numpy as np
 from ibik_pin.exceptions import FileFormatError, InputError
 from ibik_pin.io.files import PathLike
 from ibik_pin.io.native_output import captured_native_stderr
+from ibik_pin.io.png import decode_grey_png
 
 __all__ = ["IMAGE_SUFFIXES", "list_mask_files", "read_image", "read_mask"]
 
@@ -24,7 +25,8 @@ IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"})
 
 
 def read_image(path: Path, flags: int, what: str) -> np.ndarray:
-    """An image file decoded by OpenCV, what its decoder prints to stderr quoted in the error.
+    """An image file decoded by OpenCV, what its decoder prints to stderr quoted in the error; read
+    as grey levels, an 8-bit grey PNG (most masks) is decoded by io.png instead, to the same pixels.
 
     Raises:
         FileFormatError: naming `what` ("mask", "background"), when the file is missing or cannot be
@@ -33,8 +35,19 @@ def read_image(path: Path, flags: int, what: str) -> np.ndarray:
     if not path.is_file():
         raise FileFormatError(f"{what} file '{path}': expected a readable image, found "
                               + ("no such file" if not path.exists() else "not a regular file"))
+    try:
+        data = path.read_bytes()
+    except OSError as error:
+        raise FileFormatError(f"{what} file '{path}': expected a readable image, "
+                              f"cannot read it ({error.strerror})") from None
+    if not data:
+        raise FileFormatError(f"{what} file '{path}': expected a readable image, found an empty file")
+    if flags == cv2.IMREAD_GRAYSCALE:
+        image = decode_grey_png(data, f"{what} file '{path}'")
+        if image is not None:
+            return image
     with captured_native_stderr() as decoder:
-        image = cv2.imread(str(path), flags)
+        image = cv2.imdecode(np.frombuffer(data, np.uint8), flags)
     if image is None:
         said = f" ({decoder.first_line()})" if decoder.first_line() else ""
         raise FileFormatError(f"{what} file '{path}': expected a readable image, OpenCV cannot decode it{said}")
