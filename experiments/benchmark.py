@@ -141,7 +141,7 @@ def whole_body(frames: int, cache: Path) -> tuple[dict, dict, cProfile.Profile]:
     # several times a small numpy call's, would weigh on our steps and not on Pink's. On one thread:
     # cProfile sees the calling thread only, and the support images would be built in another.
     profile.enable()
-    run_variant(inputs, variant("ibik2v"), "clean", {"method": "qp", "read_ahead": False},
+    run_variant(inputs, variant("ibik2v"), "clean", {"method": "qp", "read_ahead": "off"},
                 out=out / "qp_2v_profiled")
     profile.disable()
     blind = run_variant(inputs, variant("pik"), "clean", out=out / "pik")
@@ -159,7 +159,7 @@ def step_rounds(inputs, run_folder: Path, frames: int, rounds: int) -> tuple[dic
     for round_index in range(rounds):
         steps = StepTimer()
         with steps.active():  # on one thread, as Pink's steps are timed: no support images built beside
-            run_variant(inputs, variant("ibik2v"), "clean", {"method": "qp", "read_ahead": False},
+            run_variant(inputs, variant("ibik2v"), "clean", {"method": "qp", "read_ahead": "off"},
                         out=run_folder.parent / f"qp_2v_timed_{round_index}")
         ours_rounds.append({"step_with_image_us": steps.median_us(steps.image),
                             "step_without_image_us": steps.median_us(steps.blind),

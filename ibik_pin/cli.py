@@ -98,10 +98,13 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--stack", type=Path, metavar="STACK.toml",
                         help="priority levels and their tasks (default: the package's default_stack.toml; "
                              "see the README, Priority stacks)")
-    parser.add_argument("--read-ahead", action=argparse.BooleanOptionalAction, default=True,
-                        help="read the next frame's silhouettes and build its support images in a second "
-                             "thread while a frame is solved (default: on; --no-read-ahead keeps the run on "
-                             "one core; ibik batch turns it off, its workers having a core each)")
+    parser.add_argument("--read-ahead", choices=("process", "thread", "off"), default="process",
+                        help="where the next frames' silhouettes are read and their support images built "
+                             "while a frame is solved: process (default; a forked child process, a thread "
+                             "where fork is not available, off Linux), thread, or off (on one core; ibik "
+                             "batch's workers, a core each)")
+    parser.add_argument("--no-read-ahead", dest="read_ahead", action="store_const", const="off",
+                        help="the same as --read-ahead off")
     parser.add_argument("--overlay", action="store_true",
                         help="also write overlay videos, a residual plot and an HTML 3D replay")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")

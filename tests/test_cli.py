@@ -102,6 +102,23 @@ def test_the_mask_filter_runs_and_is_reported(dataset, tmp_path):
     assert report["end_effector_residual_m"]["mean"] < 0.01
 
 
+def test_every_read_ahead_mode_gives_the_same_motion_and_silhouette_report(dataset, tmp_path):
+    """The mask filter on, so that the child process reads each frame's masks through the temporal
+    filter ahead of the frame it prepares, and sends the silhouette figures back."""
+    reports, motions = {}, {}
+    for mode in ("process", "thread", "off"):
+        out = tmp_path / mode
+        assert main(track_arguments(dataset, out, "--mask-filter", "1", "--read-ahead", mode)) == 0
+        reports[mode] = json.loads((out / "report.json").read_text())
+        motions[mode] = (out / "q.csv").read_text()
+    assert motions["process"] == motions["thread"] == motions["off"]
+    areas = reports["off"]["silhouettes"]["mask_area_per_view"]
+    assert all(len(per_frame) == 30 and min(per_frame) > 0 for per_frame in areas.values())
+    for mode in ("process", "thread"):
+        assert reports[mode]["silhouettes"] == reports["off"]["silhouettes"]
+    assert main(track_arguments(dataset, tmp_path / "alias", "--no-read-ahead")) == 0
+
+
 def test_the_image_stop_is_taken_from_the_command_line_and_reported(dataset, runs, tmp_path):
     folder, _ = runs
     peaked = json.loads((folder / "ibik" / "report.json").read_text())

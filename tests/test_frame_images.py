@@ -1,15 +1,18 @@
-"""Tests of the frame images prepared one frame ahead: the same views as prepared in turn, frames
-read in order and once, errors raised at their frame, nothing left running after the loop."""
+"""Tests of the frame images prepared ahead (in a child process, a thread, or in turn): the same
+views as prepared in turn, frames read in order and once, errors raised at their frame, nothing
+left running after the loop."""
 
+import multiprocessing
+import os
 import threading
 
 import numpy as np
 import pinocchio as pin
 import pytest
 
-from ibik_pin.exceptions import InputError
+from ibik_pin.exceptions import IbikError, InputError
 from ibik_pin.synthetic.silhouettes import render_silhouettes
-from ibik_pin.tracking.frame_images import FrameImagesAhead, frame_images
+from ibik_pin.tracking.frame_images import READ_AHEAD_MODES, FrameImagesAhead, frame_images
 from ibik_pin.vision.medial_axis import medial_axis_pixels
 from ibik_pin.vision.pinhole import look_at_camera
 from ibik_pin.vision.support import support_from_mask
@@ -37,59 +40,115 @@ def rig(human):
 
 
 class Source:
-    """A silhouette source that records which frames were read, and by which thread."""
+    """A silhouette source that records which frames were read, and by which process and thread;
+    its records come back from a child process (tracking.image_process.FrameRecords)."""
 
     def __init__(self, masks, failing_frame: int | None = None) -> None:
         self.masks, self.failing_frame = masks, failing_frame
-        self.read: list[int] = []
-        self.threads: set[str] = set()
+        self.read: list[tuple[int, int, str]] = []  # frame, process id, thread name
 
     def __call__(self, frame: int):
-        self.read.append(frame)
-        self.threads.add(threading.current_thread().name)
+        self.read.append((frame, os.getpid(), threading.current_thread().name))
         if frame == self.failing_frame:
             raise InputError(f"frame {frame}: the mask cannot be read")
         return self.masks[frame]
+
+    def recorded_frames(self) -> int:
+        return len(self.read)
+
+    def records(self, start, stop):
+        return self.read[start:stop]
+
+    def add_records(self, start, records) -> None:
+        self.read[start:start + len(records)] = records
 
 
 def prepare(source, cameras, frame):
     return frame_images(source, cameras, [4.0, 4.0], [6.0, 6.0], frame)
 
 
-@pytest.mark.parametrize("threaded", [True, False])
-def test_frames_prepared_ahead_are_those_prepared_in_turn_read_in_order_and_once(rig, threaded):
+def _children() -> list:
+    return [child for child in multiprocessing.active_children() if child.name == "ibik-frame-images"]
+
+
+@pytest.mark.parametrize("mode", READ_AHEAD_MODES)
+def test_frames_prepared_ahead_are_those_prepared_in_turn_read_in_order_and_once(rig, mode):
     cameras, masks = rig
     ahead_source, turn_source = Source(masks), Source(masks)
-    with FrameImagesAhead(lambda frame: prepare(ahead_source, cameras, frame), FRAMES, threaded) as images:
+    with FrameImagesAhead(lambda frame: prepare(ahead_source, cameras, frame), FRAMES, mode, ahead_source) as images:
         prepared = [images.get(frame) for frame in range(FRAMES)]
     for frame, ahead in enumerate(prepared):
         in_turn = prepare(turn_source, cameras, frame)
         assert ahead.disabled == in_turn.disabled == (["side"] if frame == 2 else [])
         for view, reference in zip(ahead.views, in_turn.views, strict=True):
+            assert view.camera is reference.camera
             assert view.support.enabled == reference.support.enabled
-            np.testing.assert_array_equal(view.support.values, reference.support.values)
+            assert view.support.held_values()[1:] == reference.support.held_values()[1:]  # the same window
+            np.testing.assert_array_equal(view.support.held_values()[0], reference.support.held_values()[0])
+            np.testing.assert_array_equal(view.support.values, reference.support.values)  # the whole frame
         assert ahead.axis_views is not None and in_turn.axis_views is not None
         for axis, reference in zip(ahead.axis_views, in_turn.axis_views, strict=True):
             np.testing.assert_array_equal(axis.pixels, reference.pixels)
-    assert ahead_source.read == list(range(FRAMES))
-    assert (threading.current_thread().name in ahead_source.threads) != threaded
+            assert axis.robust_scale_px == reference.robust_scale_px
+    assert [frame for frame, _, _ in ahead_source.read] == list(range(FRAMES))
+    here = (os.getpid(), threading.current_thread().name)
+    where = {frame: (pid, thread) == here for frame, pid, thread in ahead_source.read}
+    # Frame 0 is prepared here by a process reader, before it forks.
+    assert where == {frame: mode == "off" or (mode == "process" and frame == 0) for frame in range(FRAMES)}
+    assert not _children()
 
 
-def test_an_error_is_raised_at_its_frame_and_the_loop_leaves_nothing_running(rig):
+@pytest.mark.parametrize("mode", READ_AHEAD_MODES)
+def test_an_error_is_raised_at_its_frame_and_the_loop_leaves_nothing_running(rig, mode):
     cameras, masks = rig
     source = Source(masks, failing_frame=2)
     got = []
 
     def track_frames():
-        with FrameImagesAhead(lambda frame: prepare(source, cameras, frame), FRAMES) as images:
+        with FrameImagesAhead(lambda frame: prepare(source, cameras, frame), FRAMES, mode) as images:
             for frame in range(FRAMES):
                 got.append(images.get(frame).disabled)
 
     with pytest.raises(InputError, match="frame 2: the mask cannot be read"):
         track_frames()
     assert got == [[], []]  # frames 0 and 1 came through
-    assert source.read == [0, 1, 2, 3][:len(source.read)] and len(source.read) <= 4  # at most one ahead
+    if mode != "process":  # a child's reads stay in the child without records
+        assert [frame for frame, _, _ in source.read] == [0, 1, 2, 3][:len(source.read)] and len(source.read) <= 4
     assert not [thread for thread in threading.enumerate() if thread.name.startswith("ibik-frame-images")]
+    assert not _children()
+
+
+def test_the_process_reader_ends_its_child_when_the_loop_stops_early(rig):
+    cameras, masks = rig
+    source = Source(masks)
+    with FrameImagesAhead(lambda frame: prepare(source, cameras, frame), FRAMES, "process") as images:
+        images.get(0)
+        images.get(1)
+        assert len(_children()) == 1
+        with pytest.raises(RuntimeError, match="in order"):
+            images.get(3)
+    assert not _children()
+
+
+def test_a_child_that_dies_is_one_clear_error(rig):
+    cameras, masks = rig
+    source = Source(masks)
+
+    def dying(frame):
+        if frame == 2:
+            os._exit(3)
+        return prepare(source, cameras, frame)
+
+    with FrameImagesAhead(dying, FRAMES, "process") as images:
+        images.get(0)
+        images.get(1)
+        with pytest.raises(IbikError, match=r"ended before frame 2 \(exit code 3\)"):
+            images.get(2)
+
+
+def test_an_unknown_mode_is_refused():
+    with pytest.raises(InputError, match="read-ahead mode: expected one of process, thread, off"):
+        FrameImagesAhead(None, 1, "fork")
 
 
 def test_the_shared_distance_transform_gives_the_support_and_medial_axis_computed_alone(human, rig):

@@ -90,14 +90,19 @@ def test_tracking_with_the_image_reports_the_image_level_and_the_overlap(human, 
     assert np.nanmax(result.target_distances) < 2e-3
 
 
-def test_reading_ahead_in_a_thread_gives_the_same_motion_as_on_one_thread(human, sequence):
+def test_reading_ahead_in_a_process_or_a_thread_gives_the_same_motion_as_on_one_thread(human, sequence):
     motion, targets = sequence
     cameras, masks = _two_views(human, motion)
     results = [Tracker(human, cameras, fast_settings(iterations=5, first_frame_iterations=20, read_ahead=ahead))
-               .track(TARGETS, targets, silhouettes=lambda frame: masks[frame]) for ahead in (True, False)]
-    np.testing.assert_array_equal(results[0].q, results[1].q)
-    np.testing.assert_array_equal(results[0].overlap, results[1].overlap)
-    assert results[0].loop_seconds > 0.0 and results[1].loop_seconds >= results[1].solve_seconds > 0.0
+               .track(TARGETS, targets, silhouettes=lambda frame: masks[frame])
+               for ahead in ("process", "thread", "off")]
+    for result in results[:2]:
+        np.testing.assert_array_equal(result.q, results[2].q)
+        np.testing.assert_array_equal(result.overlap, results[2].overlap)
+        assert result.loop_seconds > 0.0
+    assert results[2].loop_seconds >= results[2].solve_seconds > 0.0
+    with pytest.raises(InputError, match="read_ahead: expected one of process, thread, off"):
+        Tracker(human, cameras, fast_settings(read_ahead=True))
 
 
 def _two_views(human, motion):

@@ -108,7 +108,7 @@ def run_batch_command(arguments: argparse.Namespace, make_job: Callable[[argpars
         job_arguments = argparse.Namespace(**{
             **vars(arguments), "targets": trial.targets, "static": None, "calibration": trial.calibration,
             "masks": trial.masks, "videos": trial.videos, "background": trial.background, "model": model,
-            "out": out, "quiet": True, "read_ahead": False})  # a worker per core: one thread each
+            "out": out, "quiet": True, "read_ahead": "off"})  # a worker per core: one thread each
         tasks.append(TrialTask(name, make_job(job_arguments), subject))
 
     outroot.mkdir(parents=True, exist_ok=True)

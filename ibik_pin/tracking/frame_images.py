@@ -1,14 +1,14 @@
-"""Each frame's image inputs, prepared one frame ahead in a worker thread.
+"""Each frame's image inputs, prepared ahead while the frame before is solved.
 
 Reading a frame's silhouettes and building its support images and medial axes needs nothing from
-the solve, and their heavy parts (OpenCV's decoding, the compiled distance transforms and medial
-axis, numpy on whole images) release the GIL. So a worker thread prepares frame t + 1 while the
-main thread solves frame t, and on two cores or more the images cost the tracking loop little of
-their time.
+the solve. So, by default, a forked child process prepares the next frames while the main process
+solves (tracking.image_process); where fork is not available, a worker thread prepares frame
+t + 1 while frame t is solved (their heavy parts, compiled, release the GIL, but each hand-over of
+the GIL stalls the solver: the process does not share it).
 
-The worker runs the frames in order, one at a time, so a silhouette source that remembers what it
-read (a temporal filter, the silhouette quality report) sees the same calls as without it. An error
-while preparing a frame is raised when the tracker asks for that frame.
+Either way the frames are prepared in order, one at a time, so a silhouette source that remembers
+what it read (a temporal filter, the silhouette quality report) sees the same calls as without
+them. An error while preparing a frame is raised when the tracker asks for that frame.
 """
 
 from __future__ import annotations
@@ -23,12 +23,13 @@ import numpy as np
 from ibik_pin.exceptions import InputError
 from ibik_pin.tasks import View
 from ibik_pin.tasks.silhouette_axis import AxisView
+from ibik_pin.tracking.image_process import FrameRecords, ImageProcess, can_fork
 from ibik_pin.vision.camera import CameraLike
 from ibik_pin.vision.distance import inside_distance, scan_mask
 from ibik_pin.vision.medial_axis import medial_axis_pixels
 from ibik_pin.vision.support import SupportImage, support_from_mask
 
-__all__ = ["FrameImages", "FrameImagesAhead", "frame_images"]
+__all__ = ["READ_AHEAD_MODES", "FrameImages", "FrameImagesAhead", "frame_images"]
 
 
 @dataclass(frozen=True)
@@ -79,27 +80,44 @@ def frame_images(source: Callable[[int], Sequence[np.ndarray]], cameras: Sequenc
     return FrameImages(views, disabled, axis_views)
 
 
-class FrameImagesAhead:
-    """Prepares frames 0 .. frame_count - 1 with `prepare(frame)`, one frame ahead of the one asked
-    (`prepare` None: a run without images, which asks for none; `threaded` False: each frame when
-    asked, in the caller's thread).
+READ_AHEAD_MODES = ("process", "thread", "off")
 
-    Use as a context manager: leaving it (also by an exception or a signal) cancels the frame
-    prepared ahead and waits for one being prepared, at most one frame's work.
+
+class FrameImagesAhead:
+    """Prepares frames 0 .. frame_count - 1 with `prepare(frame)` ahead of the one asked (`prepare`
+    None: a run without images, which asks for none).
+
+    Modes: "process" (tracking.image_process: a forked child, a few frames ahead; where fork is
+    not available, a thread), "thread" (one frame ahead in a worker thread), "off" (each frame
+    when asked, in the caller's thread). The process mode needs the frames asked in order;
+    `records` is the silhouette source whose per-frame figures the child sends back
+    (image_process.FrameRecords), if any.
+
+    Use as a context manager: leaving it (also by an exception or a signal) cancels the frames
+    prepared ahead and waits for one being prepared (a thread), or ends the child process.
     """
 
-    def __init__(self, prepare: Callable[[int], FrameImages] | None, frame_count: int, threaded: bool = True) -> None:
+    def __init__(self, prepare: Callable[[int], FrameImages] | None, frame_count: int, mode: str = "process",
+                 records: FrameRecords | None = None) -> None:
+        if mode not in READ_AHEAD_MODES:
+            raise InputError(f"read-ahead mode: expected one of {', '.join(READ_AHEAD_MODES)}, got {mode!r}")
+        if mode == "process" and not can_fork():
+            mode = "thread"
         self._prepare = prepare
         self._frame_count = frame_count
-        self._threaded = threaded
+        self._mode = mode
+        self._records = records
         self._entered = False
         self._executor: ThreadPoolExecutor | None = None
+        self._process: ImageProcess | None = None
         self._ahead: dict[int, Future[FrameImages]] = {}
 
     def __enter__(self) -> FrameImagesAhead:
         self._entered = True
-        if self._prepare is not None and self._threaded:
+        if self._prepare is not None and self._mode == "thread":
             self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="ibik-frame-images")
+        elif self._prepare is not None and self._mode == "process":
+            self._process = ImageProcess(self._prepare, self._frame_count, self._records)
         return self
 
     def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
@@ -111,11 +129,16 @@ class FrameImagesAhead:
         if self._executor is not None:
             self._executor.shutdown(wait=True)
             self._executor = None
+        if self._process is not None:
+            self._process.close()
+            self._process = None
 
     def get(self, frame: int) -> FrameImages:
         """Frame `frame`'s images (prepared now if it was not ahead); starts preparing the next one."""
         if not self._entered or self._prepare is None:
             raise RuntimeError("FrameImagesAhead.get outside its `with` block or without `prepare`")
+        if self._process is not None:
+            return self._process.get(frame)
         if self._executor is None:
             return self._prepare(frame)
         future = self._ahead.pop(frame, None)

@@ -33,7 +33,8 @@ from ibik_pin.tasks.segments import SegmentCriterion
 from ibik_pin.tasks.silhouette_axis import SilhouetteAxisTask
 from ibik_pin.tasks.weighted_sum import WeightedSum
 from ibik_pin.tracking.first_frame import solve_first_frame
-from ibik_pin.tracking.frame_images import FrameImagesAhead, frame_images
+from ibik_pin.tracking.frame_images import READ_AHEAD_MODES, FrameImagesAhead, frame_images
+from ibik_pin.tracking.image_process import FrameRecords
 from ibik_pin.tracking.levels import StackPlan, StackTasks
 from ibik_pin.tracking.outcomes import level_outcomes
 from ibik_pin.tracking.result import TrackingResult
@@ -100,9 +101,10 @@ class TrackingSettings:
         stack: the priority levels and their tasks (tracking.stack); None: Stack.default(). An
             image task's criterion, step and views, when the stack gives them, replace
             `criterion`, `image_step` and the cameras; a posture task's weight `posture_weight`.
-        read_ahead: read each frame's silhouettes and build its support images in a second thread
-            while the frame before is solved (tracking.frame_images); False keeps the run on one
-            thread (ibik batch's workers, one per core). The results are the same.
+        read_ahead: where each frame's silhouettes are read and its support images built while
+            the frame before is solved (tracking.frame_images): "process" (a forked child; a thread
+            where fork is not available, off Linux), "thread", or "off" (in turn, on one thread:
+            ibik batch's workers, one per core). The results are the same.
     """
 
     method: str = "qp"
@@ -124,7 +126,7 @@ class TrackingSettings:
     step_tolerance: float | None = None
     image_stop: str = "peak"
     stack: Stack | None = None
-    read_ahead: bool = True
+    read_ahead: str = "process"
 
 
 class Tracker:
@@ -161,6 +163,9 @@ class Tracker:
         if self.settings.image_moves not in IMAGE_MOVES:
             raise InputError(f"image_moves: expected one of {', '.join(IMAGE_MOVES)}, "
                              f"found {self.settings.image_moves!r}")
+        if self.settings.read_ahead not in READ_AHEAD_MODES:
+            raise InputError(f"read_ahead: expected one of {', '.join(READ_AHEAD_MODES)}, "
+                             f"found {self.settings.read_ahead!r}")
         if self.settings.image_stop not in IMAGE_STOPS:
             raise InputError(f"image_stop: expected one of {', '.join(IMAGE_STOPS)}, "
                              f"found {self.settings.image_stop!r}")
@@ -308,7 +313,8 @@ class Tracker:
         prepare = None if source is None else functools.partial(
             frame_images, source, self.cameras, caps, axis_scales if self.settings.criterion == "two-way" else None)
         loop_started = time.perf_counter()
-        with FrameImagesAhead(prepare, frame_count, threaded=self.settings.read_ahead) as images:
+        records = silhouettes if isinstance(silhouettes, FrameRecords) else None
+        with FrameImagesAhead(prepare, frame_count, self.settings.read_ahead, records) as images:
             for frame in range(frame_count):
                 present = np.all(np.isfinite(targets[frame]), axis=1)
                 for k, name in enumerate(names):

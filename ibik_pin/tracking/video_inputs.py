@@ -14,7 +14,7 @@ import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import cv2
 import numpy as np
@@ -346,6 +346,20 @@ class SilhouetteQualityReader:
                     self._inside[frame, index] = points_inside(camera, mask, points[present]).mean()
             self._read[frame] = True
         return masks
+
+    # Its figures, for a reader in another process (tracking.image_process.FrameRecords).
+    def recorded_frames(self) -> int:
+        """How many frames, from frame 0 on, have been read (their figures kept)."""
+        unread = np.flatnonzero(~self._read)
+        return int(unread[0]) if unread.size else len(self._read)
+
+    def records(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self._inside[start:stop].copy(), self._areas[start:stop].copy(), self._read[start:stop].copy()
+
+    def add_records(self, start: int, records: object) -> None:
+        inside, areas, read = cast(tuple[np.ndarray, np.ndarray, np.ndarray], records)
+        stop = start + len(read)
+        self._inside[start:stop], self._areas[start:stop], self._read[start:stop] = inside, areas, read
 
     def quality(self, segmenter: str) -> SilhouetteQuality:
         """SilhouetteQuality over every frame (those not read yet are read now)."""

@@ -1,0 +1,270 @@
+"""Each frame's image inputs prepared in a child process, the arrays passed through shared memory.
+
+Why a process and not only a thread: the thread that prepares the images (tracking.frame_images)
+runs compiled code that releases the GIL, and every time it takes the GIL back the solver's thread
+waits for a hand-over. Measured on real boxing with two views, the solver's own work took 39% longer
+beside that thread than alone (6.3 against 4.5 ms a frame). A child process has a GIL of its own.
+
+How: the parent prepares frame 0 itself, then forks; the child, a copy of the parent at that point
+(the silhouette source with its state, the cameras, nothing pickled), prepares frames 1, 2, ... in
+order. Each frame's arrays (support windows, the silhouettes bit-packed for the rare read outside a
+window, medial axes) are written into one of a few slots of an anonymous shared mapping, and a small
+message through a pipe says where; the parent copies them out and hands the slot back. An array that
+does not fit its slot travels in the message instead. Per-frame figures the source keeps (the
+silhouette quality report's) come back with each frame.
+
+Fork only: on Linux. Elsewhere tracking.frame_images uses a thread.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import mmap
+import multiprocessing
+import multiprocessing.connection
+import multiprocessing.process
+import pickle
+import signal
+import sys
+import warnings
+from collections.abc import Callable
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from ibik_pin.exceptions import IbikError
+from ibik_pin.tasks import View
+from ibik_pin.tasks.silhouette_axis import AxisView
+from ibik_pin.vision.support import SupportImage, WindowedParts, support_from_parts, windowed_parts
+
+__all__ = ["FrameRecords", "ImageProcess", "can_fork"]
+
+SLOTS = 3  # frames the child may prepare ahead of the one being solved
+ALIGNMENT = 64  # bytes; each array starts on a cache line
+_STOP_WAIT_S = 5.0
+
+
+def can_fork() -> bool:
+    """Whether images can be prepared in a forked process here (Linux; fork is unsafe on macOS)."""
+    return sys.platform.startswith("linux") and "fork" in multiprocessing.get_all_start_methods()
+
+
+@runtime_checkable
+class FrameRecords(Protocol):
+    """A silhouette source that keeps per-frame figures (tracking.video_inputs.SilhouetteQualityReader):
+    the child process reads the frames, so their figures are sent back to the parent's source."""
+
+    def recorded_frames(self) -> int:
+        """How many frames, from frame 0 on, hold their figures."""
+        ...
+
+    def records(self, start: int, stop: int) -> object:
+        """The figures of frames start .. stop - 1 (picklable)."""
+        ...
+
+    def add_records(self, start: int, records: object) -> None:
+        """Take the figures of frames from `start` on, as `records` gave them."""
+        ...
+
+
+class _Slots:
+    """Writes and reads arrays at offsets of one slot of the shared mapping."""
+
+    def __init__(self, memory: mmap.mmap, slot_bytes: int) -> None:
+        self.memory, self.slot_bytes = memory, slot_bytes
+
+    def write(self, slot: int, arrays: list[np.ndarray]) -> list:
+        """Each array's place: (offset, shape, dtype) in the slot, or the array itself if the slot is full."""
+        places: list = []
+        offset = 0
+        base = slot * self.slot_bytes
+        for array in arrays:
+            array = np.ascontiguousarray(array)
+            if offset + array.nbytes > self.slot_bytes:
+                places.append(array)
+                continue
+            target = np.frombuffer(self.memory, np.uint8, array.nbytes, base + offset)
+            target[:] = array.reshape(-1).view(np.uint8)
+            places.append((offset, array.shape, array.dtype.str))
+            offset += -(-array.nbytes // ALIGNMENT) * ALIGNMENT
+        return places
+
+    def read(self, slot: int, places: list) -> list[np.ndarray]:
+        """Copies of the arrays `write` placed."""
+        arrays = []
+        for place in places:
+            if isinstance(place, np.ndarray):
+                arrays.append(place)
+                continue
+            offset, shape, dtype = place
+            count = int(np.prod(shape, dtype=np.int64))
+            arrays.append(np.frombuffer(self.memory, np.dtype(dtype), count, slot * self.slot_bytes + offset)
+                          .reshape(shape).copy())
+        return arrays
+
+
+def _pack(images) -> tuple[tuple, list[np.ndarray]]:
+    """FrameImages as (a picklable description, its arrays)."""
+    arrays: list[np.ndarray] = []
+
+    def add(array: np.ndarray) -> int:
+        arrays.append(array)
+        return len(arrays) - 1
+
+    views: list[tuple] = []
+    for view in images.views:
+        parts = windowed_parts(view.support)
+        if parts is not None:  # the arrays by their index in `arrays`
+            views.append(("window", add(parts.values), parts.row, parts.column, parts.size, add(parts.mask_bits),
+                          parts.inside_cap_px, parts.outside_cap_px, parts.smooth_sigma_px))
+        else:
+            views.append(("values", add(view.support.values), view.support.enabled))
+    axes = None if images.axis_views is None else [(add(axis.pixels), axis.robust_scale_px)
+                                                  for axis in images.axis_views]
+    return (views, axes, list(images.disabled)), arrays
+
+
+def _unpack(description: tuple, arrays: list[np.ndarray], cameras: list):
+    from ibik_pin.tracking.frame_images import FrameImages  # frame_images imports this module
+
+    views_packed, axes, disabled = description
+    views = []
+    for camera, (kind, values, *fields) in zip(cameras, views_packed, strict=True):
+        if kind == "window":
+            row, column, size, bits, inside_cap, outside_cap, sigma = fields
+            support = support_from_parts(WindowedParts(arrays[values], row, column, size, arrays[bits],
+                                                       inside_cap, outside_cap, sigma))
+        else:
+            support = SupportImage(arrays[values], enabled=fields[0])
+        views.append(View(camera, support))
+    axis_views = None if axes is None else [AxisView(camera, arrays[index], scale)
+                                            for camera, (index, scale) in zip(cameras, axes, strict=True)]
+    return FrameImages(views, disabled, axis_views)
+
+
+def _slot_bytes(first) -> int:
+    """Room for a frame's arrays: every view's support over the whole frame, its silhouette's bits,
+    and four times the first frame's medial axes."""
+    room = 0
+    for view in first.views:
+        width, height = view.support.size
+        room += 4 * width * height + width * height // 8 + 2 * ALIGNMENT
+    if first.axis_views is not None:
+        room += sum(4 * axis.pixels.nbytes + 4096 for axis in first.axis_views)
+    return room
+
+
+def _child(prepare: Callable, frame_count: int, connection, slots: _Slots, records: FrameRecords | None) -> None:
+    """The child's loop: frames 1 .. frame_count - 1, each into a free slot; an error is sent at its
+    frame and ends the loop."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle; it ends the child
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not the parent's handler (the CLI's raises an error)
+    warnings.simplefilter("ignore")  # the parent reports what matters; the child writes nothing
+    free = list(range(SLOTS))
+    sent = records.recorded_frames() if records is not None else 0
+    for frame in range(1, frame_count):
+        try:
+            images = prepare(frame)
+        except BaseException as error:  # every failure goes to the parent, at its frame
+            connection.send(("error", frame, _picklable(error)))
+            return
+        while not free:
+            free.append(connection.recv())
+        slot = free.pop()
+        description, arrays = _pack(images)
+        news = None
+        if records is not None and records.recorded_frames() > sent:
+            stop = records.recorded_frames()
+            news = (sent, records.records(sent, stop))
+            sent = stop
+        connection.send(("frame", frame, slot, description, slots.write(slot, arrays), news))
+
+
+def _picklable(error: BaseException) -> BaseException:
+    try:
+        pickle.loads(pickle.dumps(error))
+        return error
+    except Exception:  # any failure to round-trip
+        return IbikError(f"preparing a frame's images failed: {type(error).__name__}: {error}")
+
+
+class ImageProcess:
+    """Frames 0 .. frame_count - 1 of `prepare(frame)` (FrameImages), asked for in order: frame 0
+    prepared here, the others in a forked child; the views of later frames get frame 0's camera
+    objects. `records`: the source whose per-frame figures the child sends back, or None. Call
+    close() when done (also after an error)."""
+
+    def __init__(self, prepare: Callable, frame_count: int, records: FrameRecords | None = None) -> None:
+        self._prepare, self._frame_count = prepare, frame_count
+        self._cameras: list = []
+        self._records = records
+        self._next = 0
+        self._process: multiprocessing.process.BaseProcess | None = None
+        self._connection: multiprocessing.connection.Connection | None = None
+        self._memory: mmap.mmap | None = None
+        self._slots: _Slots | None = None
+
+    def get(self, frame: int):
+        if frame != self._next:
+            raise RuntimeError(f"ImageProcess: frames are prepared in order; asked {frame}, next {self._next}")
+        self._next += 1
+        if frame == 0:
+            first = self._prepare(0)
+            self._cameras = [view.camera for view in first.views]
+            if self._frame_count > 1:
+                self._start(_slot_bytes(first))
+            return first
+        return self._receive(frame)
+
+    def _start(self, slot_bytes: int) -> None:
+        self._memory = mmap.mmap(-1, SLOTS * slot_bytes)  # anonymous and shared: the child writes into it
+        self._slots = _Slots(self._memory, slot_bytes)
+        context = multiprocessing.get_context("fork")
+        self._connection, child_end = context.Pipe(duplex=True)
+        for stream in (sys.stdout, sys.stderr):  # nothing buffered to be written twice by the child
+            stream.flush()
+        self._process = context.Process(target=_child, name="ibik-frame-images", daemon=True,
+                                        args=(self._prepare, self._frame_count, child_end, self._slots,
+                                              self._records))
+        self._process.start()
+        child_end.close()
+
+    def _receive(self, frame: int):
+        assert self._connection is not None and self._slots is not None
+        try:
+            message = self._connection.recv()
+        except (EOFError, OSError):  # the pipe closed, or reset (a socket pair) by the child's end
+            if self._process is not None:
+                self._process.join(_STOP_WAIT_S)
+            code = self._process.exitcode if self._process is not None else None
+            raise IbikError(f"the process preparing the images ended before frame {frame} "
+                            f"(exit code {code})") from None
+        if message[0] == "error":
+            raise message[2]
+        _, sent_frame, slot, description, places, news = message
+        if sent_frame != frame:
+            raise RuntimeError(f"ImageProcess: received frame {sent_frame}, expected {frame}")
+        arrays = self._slots.read(slot, places)
+        with contextlib.suppress(OSError):  # the child may have sent its last frame and ended
+            self._connection.send(slot)
+        if news is not None and self._records is not None:
+            self._records.add_records(*news)
+        return _unpack(description, arrays, self._cameras)
+
+    def close(self) -> None:
+        """End the child (at once if frames are left) and free the shared memory."""
+        if self._process is not None:
+            if self._process.is_alive():
+                self._process.terminate()
+            self._process.join(_STOP_WAIT_S)
+            if self._process.is_alive():
+                self._process.kill()
+                self._process.join()
+            self._process = None
+        if self._connection is not None:
+            self._connection.close()
+            self._connection = None
+        if self._memory is not None:
+            with contextlib.suppress(BufferError):  # an array still views it: the mapping goes with it
+                self._memory.close()
+            self._memory = None
