@@ -146,6 +146,19 @@ def test_a_child_that_dies_is_one_clear_error(rig):
             images.get(2)
 
 
+def _mode_in_a_daemon(results) -> None:
+    ahead = FrameImagesAhead(lambda frame: None, 2, "process")
+    results.put(ahead.mode)
+
+
+def test_a_pool_worker_which_may_not_fork_reads_ahead_in_a_thread():
+    results = multiprocessing.get_context("fork").Queue()
+    worker = multiprocessing.get_context("fork").Process(target=_mode_in_a_daemon, args=(results,), daemon=True)
+    worker.start()
+    worker.join(30)
+    assert results.get(timeout=5) == "thread"
+
+
 def test_an_unknown_mode_is_refused():
     with pytest.raises(InputError, match="read-ahead mode: expected one of process, thread, off"):
         FrameImagesAhead(None, 1, "fork")

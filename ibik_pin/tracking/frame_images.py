@@ -112,6 +112,11 @@ class FrameImagesAhead:
         self._process: ImageProcess | None = None
         self._ahead: dict[int, Future[FrameImages]] = {}
 
+    @property
+    def mode(self) -> str:
+        """The mode in use: the one asked for, or "thread" for "process" where fork is not available."""
+        return self._mode
+
     def __enter__(self) -> FrameImagesAhead:
         self._entered = True
         if self._prepare is not None and self._mode == "thread":

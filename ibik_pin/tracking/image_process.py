@@ -45,8 +45,10 @@ _STOP_WAIT_S = 5.0
 
 
 def can_fork() -> bool:
-    """Whether images can be prepared in a forked process here (Linux; fork is unsafe on macOS)."""
-    return sys.platform.startswith("linux") and "fork" in multiprocessing.get_all_start_methods()
+    """Whether images can be prepared in a forked process here: on Linux (fork is unsafe on macOS),
+    and not from a daemonic process (a pool's worker), which may not have children."""
+    return (sys.platform.startswith("linux") and "fork" in multiprocessing.get_all_start_methods()
+            and not multiprocessing.current_process().daemon)
 
 
 @runtime_checkable
