@@ -73,28 +73,41 @@ def _children() -> list:
 
 @pytest.mark.parametrize("mode", READ_AHEAD_MODES)
 def test_frames_prepared_ahead_are_those_prepared_in_turn_read_in_order_and_once(rig, mode):
+    """Twelve frames (the rig's five in turn), more than the process reader's slots: each frame is
+    checked while it is valid, as the tracker uses it, and the frame before it still is."""
     cameras, masks = rig
+    frames = 12
+    masks = [masks[frame % FRAMES] for frame in range(frames)]
     ahead_source, turn_source = Source(masks), Source(masks)
-    with FrameImagesAhead(lambda frame: prepare(ahead_source, cameras, frame), FRAMES, mode, ahead_source) as images:
-        prepared = [images.get(frame) for frame in range(FRAMES)]
-    for frame, ahead in enumerate(prepared):
+
+    def check(ahead, frame):
         in_turn = prepare(turn_source, cameras, frame)
-        assert ahead.disabled == in_turn.disabled == (["side"] if frame == 2 else [])
+        assert ahead.disabled == in_turn.disabled == (["side"] if frame % FRAMES == 2 else [])
         for view, reference in zip(ahead.views, in_turn.views, strict=True):
             assert view.camera is reference.camera
             assert view.support.enabled == reference.support.enabled
             assert view.support.held_values()[1:] == reference.support.held_values()[1:]  # the same window
             np.testing.assert_array_equal(view.support.held_values()[0], reference.support.held_values()[0])
-            np.testing.assert_array_equal(view.support.values, reference.support.values)  # the whole frame
         assert ahead.axis_views is not None and in_turn.axis_views is not None
         for axis, reference in zip(ahead.axis_views, in_turn.axis_views, strict=True):
             np.testing.assert_array_equal(axis.pixels, reference.pixels)
             assert axis.robust_scale_px == reference.robust_scale_px
-    assert [frame for frame, _, _ in ahead_source.read] == list(range(FRAMES))
+
+    with FrameImagesAhead(lambda frame: prepare(ahead_source, cameras, frame), frames, mode, ahead_source) as images:
+        previous = None
+        for frame in range(frames):
+            current = images.get(frame)
+            check(current, frame)
+            if previous is not None:
+                check(previous, frame - 1)
+            previous = current
+        for view, reference in zip(current.views, prepare(turn_source, cameras, frames - 1).views, strict=True):
+            np.testing.assert_array_equal(view.support.values, reference.support.values)  # the whole frame
+    assert [frame for frame, _, _ in ahead_source.read] == list(range(frames))
     here = (os.getpid(), threading.current_thread().name)
     where = {frame: (pid, thread) == here for frame, pid, thread in ahead_source.read}
     # Frame 0 is prepared here by a process reader, before it forks.
-    assert where == {frame: mode == "off" or (mode == "process" and frame == 0) for frame in range(FRAMES)}
+    assert where == {frame: mode == "off" or (mode == "process" and frame == 0) for frame in range(frames)}
     assert not _children()
 
 

@@ -89,7 +89,8 @@ class FrameImagesAhead:
 
     Modes: "process" (tracking.image_process: a forked child, a few frames ahead; where fork is
     not available, a thread), "thread" (one frame ahead in a worker thread), "off" (each frame
-    when asked, in the caller's thread). The process mode needs the frames asked in order;
+    when asked, in the caller's thread). The process mode needs the frames asked in order, and a
+    frame's arrays are the child's shared memory, valid until two more frames have been asked for;
     `records` is the silhouette source whose per-frame figures the child sends back
     (image_process.FrameRecords), if any.
 

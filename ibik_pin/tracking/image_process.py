@@ -9,9 +9,10 @@ How: the parent prepares frame 0 itself, then forks; the child, a copy of the pa
 (the silhouette source with its state, the cameras, nothing pickled), prepares frames 1, 2, ... in
 order. Each frame's arrays (support windows, the silhouettes bit-packed for the rare read outside a
 window, medial axes) are written into one of a few slots of an anonymous shared mapping, and a small
-message through a pipe says where; the parent copies them out and hands the slot back. An array that
-does not fit its slot travels in the message instead. Per-frame figures the source keeps (the
-silhouette quality report's) come back with each frame.
+message through a pipe says where. The parent reads them in place and hands the slot back once two
+more frames have been asked for: a frame's images stay valid while the next frame is set up. An
+array that does not fit its slot travels in the message instead. Per-frame figures the source keeps
+(the silhouette quality report's) come back with each frame.
 
 Fork only: on Linux. Elsewhere tracking.frame_images uses a thread.
 """
@@ -39,7 +40,10 @@ from ibik_pin.vision.support import SupportImage, WindowedParts, support_from_pa
 
 __all__ = ["FrameRecords", "ImageProcess", "can_fork"]
 
-SLOTS = 3  # frames the child may prepare ahead of the one being solved
+# Slots of the shared mapping: the frame being solved and the one before keep theirs (their arrays
+# are read in place), the child prepares the next frames in the others.
+SLOTS = 4
+HELD = 2
 ALIGNMENT = 64  # bytes; each array starts on a cache line
 _STOP_WAIT_S = 5.0
 
@@ -92,7 +96,7 @@ class _Slots:
         return places
 
     def read(self, slot: int, places: list) -> list[np.ndarray]:
-        """Copies of the arrays `write` placed."""
+        """The arrays `write` placed, read-only views of the slot (valid until it is handed back)."""
         arrays = []
         for place in places:
             if isinstance(place, np.ndarray):
@@ -100,8 +104,9 @@ class _Slots:
                 continue
             offset, shape, dtype = place
             count = int(np.prod(shape, dtype=np.int64))
-            arrays.append(np.frombuffer(self.memory, np.dtype(dtype), count, slot * self.slot_bytes + offset)
-                          .reshape(shape).copy())
+            array = np.frombuffer(self.memory, np.dtype(dtype), count, slot * self.slot_bytes + offset).reshape(shape)
+            array.setflags(write=False)
+            arrays.append(array)
         return arrays
 
 
@@ -201,6 +206,7 @@ class ImageProcess:
         self._cameras: list = []
         self._records = records
         self._next = 0
+        self._held: list[int] = []  # the slots of the last frames handed out, oldest first
         self._process: multiprocessing.process.BaseProcess | None = None
         self._connection: multiprocessing.connection.Connection | None = None
         self._memory: mmap.mmap | None = None
@@ -246,9 +252,13 @@ class ImageProcess:
         _, sent_frame, slot, description, places, news = message
         if sent_frame != frame:
             raise RuntimeError(f"ImageProcess: received frame {sent_frame}, expected {frame}")
+        # The frame's arrays are read in place: its slot goes back to the child once two more frames
+        # have been asked for (the tracker's image task holds a frame's views until the next frame's).
+        self._held.append(slot)
+        if len(self._held) > HELD:
+            with contextlib.suppress(OSError):  # the child may have sent its last frame and ended
+                self._connection.send(self._held.pop(0))
         arrays = self._slots.read(slot, places)
-        with contextlib.suppress(OSError):  # the child may have sent its last frame and ended
-            self._connection.send(slot)
         if news is not None and self._records is not None:
             self._records.add_records(*news)
         return _unpack(description, arrays, self._cameras)
