@@ -6,6 +6,7 @@ import pytest
 from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError
 from ibik_pin.tasks import ImageTask, View
+from ibik_pin.tasks.segments import SegmentCriterion
 from ibik_pin.tasks.silhouette_axis import AxisView, SilhouetteAxisTask
 from ibik_pin.tracking.swivel import SwivelSearch, swivel_circle
 from ibik_pin.vision.medial_axis import medial_axis_pixels
@@ -117,6 +118,8 @@ class _Towards:
     def values_at(self, positions, moved=None, pose=None):
         return -np.linalg.norm(positions[:, 0] - self.point, axis=1)
 
+    values_at_moves = SegmentCriterion.values_at_moves  # each move through values_at
+
 
 def test_a_hint_needs_every_term_to_agree(human):
     import pinocchio as pin
@@ -161,6 +164,8 @@ def test_views_cross_only_when_two_optical_axes_are_far_from_parallel():
 
 
 def test_the_search_reading_each_term_at_the_pose_gives_the_values_of_one_computing_it(human, monkeypatch):
+    """Every limb's candidates in one values_at_moves call per term, each term read at the pose once:
+    the values values_at gives each limb's candidates computed from scratch, to the bit."""
     import pinocchio as pin
 
     q = pin.neutral(human.model)
@@ -172,23 +177,26 @@ def test_the_search_reading_each_term_at_the_pose_gives_the_values_of_one_comput
     terms = [(ImageTask(human, image_views), 1.0), (SilhouetteAxisTask(human, axis_views), 1.0)]
     search = SwivelSearch(human, terms, samples=36)
     limbs = ["LElbow", "RElbow", "LKnee", "RKnee"]
-    values: dict[bool, list] = {True: [], False: []}  # each values_at answer, with and without the pose
-    hints = {}
-    for with_pose in (True, False):
-        for task, _ in terms:
-            plain = type(task).values_at.__get__(task)
+    answers: list = []  # each term's moves and answers
+    for task, _ in terms:
+        batched = type(task).values_at_moves.__get__(task)
 
-            def recorded(positions, moved=None, pose=None, plain=plain, out=values[with_pose]):
-                out.append(plain(positions, moved, pose))
-                return out[-1]
+        def recorded(positions, pose, moves, batched=batched, task=task):
+            answers.append((task, positions, moves, batched(positions, pose, moves)))
+            return answers[-1][3]
 
-            monkeypatch.setattr(task, "values_at", recorded)
-            if not with_pose:
-                monkeypatch.setattr(task, "at_pose", lambda positions: None)
-        hints[with_pose] = search.hints(configuration, limbs)
-    assert len(values[True]) == 2 * len(limbs)  # every limb searched, by both terms
-    for mine, reference in zip(values[True], values[False], strict=True):
-        np.testing.assert_array_equal(mine, reference)  # tolerance 0: the same bits
-    assert hints[True].keys() == hints[False].keys()
-    for name in hints[True]:
-        np.testing.assert_array_equal(hints[True][name], hints[False][name])
+        monkeypatch.setattr(task, "values_at_moves", recorded)
+    hints = search.hints(configuration, limbs)
+    assert [len(moves) for _, _, moves, _ in answers] == [len(limbs)] * 2  # every limb, by both terms
+    for task, positions, moves, values in answers:
+        for (rows, placed), mine in zip(moves, values, strict=True):
+            candidates = np.repeat(positions[None], len(placed), axis=0)
+            candidates[:, rows[0]] = placed
+            np.testing.assert_array_equal(mine, task.values_at(candidates, moved=rows))  # tolerance 0
+    for task, _ in terms:  # the search again, each limb and term computed from scratch
+        monkeypatch.setattr(task, "values_at_moves", type(task).values_at_moves.__get__(task))
+        monkeypatch.setattr(task, "at_pose", lambda positions: None)
+    plain = search.hints(configuration, limbs)
+    assert hints.keys() == plain.keys()
+    for name in hints:
+        np.testing.assert_array_equal(hints[name], plain[name])

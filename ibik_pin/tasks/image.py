@@ -166,6 +166,36 @@ class ImageTask(SegmentCriterion):
             values += moving_values.sum(axis=1) + still_values.sum()
         return values / (samples * max(len(self._active_views), 1))
 
+    def values_at_moves(self, positions: np.ndarray, pose: object | None,
+                        moves: Sequence[tuple[np.ndarray, np.ndarray]]) -> list[np.ndarray]:
+        """values_at for each move (SegmentCriterion.values_at_moves), every move's moving samples
+        read in one pass per view: the same values, to the bit."""
+        if pose is None:
+            return super().values_at_moves(positions, pose, moves)
+        known = cast(list, pose)
+        samples = self._interpolation.shape[0]
+        changes, shapes, points = [], [], []
+        for rows, placed in moves:
+            candidates = np.repeat(positions[None], len(placed), axis=0)
+            candidates[:, rows[0]] = placed
+            changing = self._changing_samples(rows)
+            moving = self._samples(self._interpolation[changing], candidates)
+            changes.append(changing)
+            shapes.append(moving.shape[:2])
+            points.append(np.ascontiguousarray(moving).reshape(-1, 3))
+        flat = np.concatenate(points) if points else np.zeros((0, 3))
+        read = [support_at(view, flat, projected=projected)
+                for view, projected in zip(self._active_views, self._pixels(flat), strict=True)]
+        values, start = [], 0
+        for changing, shape in zip(changes, shapes, strict=True):
+            stop = start + shape[0] * shape[1]
+            total = np.zeros(shape[0])
+            for view_values, at_pose in zip(read, known, strict=True):
+                total += view_values[start:stop].reshape(shape).sum(axis=1) + at_pose[:, ~changing].sum()
+            values.append(total / (samples * max(len(self._active_views), 1)))
+            start = stop
+        return values
+
     def _changing_samples(self, moved: np.ndarray) -> np.ndarray:
         """(M,) bool: the samples on a segment that a `moved` row ends (kept per set of rows)."""
         key = np.asarray(moved).tobytes()

@@ -76,6 +76,19 @@ class SegmentCriterion(GradientTask):
         (K, 3) (the swivel search tries every free limb of a frame about one pose); None: nothing."""
         return None
 
+    def values_at_moves(self, positions: np.ndarray, pose: object | None,
+                        moves: Sequence[tuple[np.ndarray, np.ndarray]]) -> list[np.ndarray]:
+        """The criterion for several sets of candidates about one pose: per move (rows (r,), placed
+        (C, 3)), the values (C,) with row rows[0] of `positions` (K, 3) at each placed point and the
+        rest kept (values_at's `moved` is `rows`); `pose`: at_pose(positions). The same values as
+        values_at per move; a subclass answers all the moves at once (the swivel search's limbs)."""
+        values = []
+        for rows, placed in moves:
+            candidates = np.repeat(positions[None], len(placed), axis=0)
+            candidates[:, rows[0]] = placed
+            values.append(self.values_at(candidates, moved=rows, pose=pose))
+        return values
+
     @abstractmethod
     def values_at(self, frame_positions: np.ndarray, moved: np.ndarray | None = None,
                   pose: object | None = None) -> np.ndarray:

@@ -149,12 +149,39 @@ class SilhouetteAxisTask(SegmentCriterion):
         that candidate.
         """
         known = cast(list | None, pose) if moved is not None else None
-        candidates = frame_positions.shape[0]
+        placed = _project_candidates(self._pixels, frame_positions, moved,
+                                     None if known is None else [at_pose[:2] for at_pose in known])
+        return self._placed_values(placed, frame_positions.shape[0], moved, known)
+
+    def values_at_moves(self, positions: np.ndarray, pose: object | None,
+                        moves: Sequence[tuple[np.ndarray, np.ndarray]]) -> list[np.ndarray]:
+        """values_at for each move (SegmentCriterion.values_at_moves), every move's points projected
+        in one call: the same values, to the bit."""
+        if pose is None or not moves:
+            return super().values_at_moves(positions, pose, moves)
+        known = cast(list, pose)
+        moving = []
+        for rows, placed in moves:
+            candidates = np.repeat(positions[None], len(placed), axis=0)
+            candidates[:, rows[0]] = placed
+            moving.append(candidates[:, rows].reshape(-1, 3))
+        projected = self._pixels(np.concatenate(moving))
+        shared = [at_pose[:2] for at_pose in known]
+        values, start = [], 0
+        for (rows, placed), points in zip(moves, moving, strict=True):
+            stop = start + len(points)
+            view_moving = [(pixels[start:stop], depth[start:stop]) for pixels, depth in projected]
+            values.append(self._placed_values(_place_candidates(shared, view_moving, len(placed), rows),
+                                              len(placed), rows, known))
+            start = stop
+        return values
+
+    def _placed_values(self, placed: list[tuple[np.ndarray, np.ndarray]], candidates: int,
+                       moved: np.ndarray | None, known: list | None) -> np.ndarray:
+        """h_axis of C candidates placed in every view (_project_candidates), shape (C,)."""
         changing, still = self._changing_segments(moved)
         values = np.zeros(candidates)
         counts = np.zeros(candidates)
-        placed = _project_candidates(self._pixels, frame_positions, moved,
-                                     None if known is None else [at_pose[:2] for at_pose in known])
         for index, (view, (pixels, visible)) in enumerate(zip(self._active_views, placed, strict=True)):
             fixed = np.empty(len(view.pixels))  # the squared distance to the segments every candidate shares
             if known is not None:
@@ -205,11 +232,17 @@ def _project_candidates(project: Callable[[np.ndarray], list[tuple[np.ndarray, n
                 for pixels, depth in project(frame_positions.reshape(-1, 3))]
     if shared is None:
         shared = [(pixels, depth > MIN_DEPTH) for pixels, depth in project(frame_positions[0])]
+    return _place_candidates(shared, project(frame_positions[:, moved].reshape(-1, 3)), candidates, moved)
+
+
+def _place_candidates(shared: list[tuple[np.ndarray, np.ndarray]], moving: list[tuple[np.ndarray, np.ndarray]],
+                      candidates: int, moved: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """_project_candidates from the pose's projection (`shared`) and that of the moved rows
+    (`moving`: per view, pixels (C * r, 2) and depth (C * r,), candidate by candidate)."""
     placed = []
-    for (shared_pixels, shared_in_front), (moving, moving_depth) in zip(
-            shared, project(frame_positions[:, moved].reshape(-1, 3)), strict=True):
+    for (shared_pixels, shared_in_front), (moving_pixels, moving_depth) in zip(shared, moving, strict=True):
         pixels = np.repeat(shared_pixels[None], candidates, axis=0)
-        pixels[:, moved] = moving.reshape(candidates, len(moved), 2)
+        pixels[:, moved] = moving_pixels.reshape(candidates, len(moved), 2)
         in_front = np.repeat(shared_in_front[None], candidates, axis=0)
         in_front[:, moved] = moving_depth.reshape(candidates, len(moved)) > MIN_DEPTH
         placed.append((pixels, np.all(in_front, axis=1)))

@@ -156,37 +156,39 @@ class SwivelSearch:
         if self.inside_silhouettes is not None and limbs:
             ends = np.array([configuration.frame_positions(ids[[0, 2]]) for ids in limb_ids]).reshape(-1, 3)
             ends_inside = self.inside_silhouettes(ends).reshape(-1, 2)
-        # Each term at the frame's pose, once for every limb: a limb's candidates move its middle
-        # joint alone, and what the other rows give is read there.
-        poses: dict[int, tuple[np.ndarray, object | None]] = {}
+        # The limbs to search, each with its candidates (its middle joint moved alone).
+        searched = []
         for name, ids, inside in zip(limbs, limb_ids, ends_inside, strict=True):
             root, middle, end = configuration.frame_positions(ids)
             if not inside.all():
                 continue
             if _distance_to_line(middle, root, end) < self.min_radius:
                 continue
-            candidates = swivel_circle(root, middle, end, int(self.samples))
-            term_values = []  # each term's weighted values over the candidates
-            for task, weight in self.terms:
-                if weight == 0.0 or not getattr(task, "enabled", True):
-                    continue
-                rows = np.flatnonzero(task.frame_ids == ids[1])
-                if rows.size == 0:
-                    continue
-                if id(task) not in poses:
-                    current = configuration.frame_positions(task.frame_ids)
-                    poses[id(task)] = current, task.at_pose(current)
-                current, pose = poses[id(task)]
-                positions = np.repeat(current[None], len(candidates), axis=0)
-                positions[:, rows[0]] = candidates
-                term_values.append(weight * task.values_at(positions, moved=rows, pose=pose))
-            if not term_values:
+            searched.append((name, ids, middle, swivel_circle(root, middle, end, int(self.samples))))
+        # Each term at the frame's pose once, and every limb's candidates in one call per term.
+        term_values: list[list[np.ndarray]] = [[] for _ in searched]  # per limb, each term's weighted values
+        for task, weight in self.terms:
+            if weight == 0.0 or not getattr(task, "enabled", True) or not searched:
                 continue
-            values = np.sum(term_values, axis=0)
+            moves, movers = [], []
+            for index, (_, ids, _, candidates) in enumerate(searched):
+                rows = np.flatnonzero(task.frame_ids == ids[1])
+                if rows.size:
+                    moves.append((rows, candidates))
+                    movers.append(index)
+            if not moves:
+                continue
+            current = configuration.frame_positions(task.frame_ids)
+            for index, values in zip(movers, task.values_at_moves(current, task.at_pose(current), moves), strict=True):
+                term_values[index].append(weight * values)
+        for (name, _, middle, candidates), terms in zip(searched, term_values, strict=True):
+            if not terms:
+                continue
+            values = np.sum(terms, axis=0)
             best = int(np.argmax(values))
             spread = values.max() - values.min()
             # Every term must agree (none worse at the hint than where the joint is): see the class.
-            agreed = all(term[best] >= term[0] for term in term_values)
+            agreed = all(term[best] >= term[0] for term in terms)
             if (agreed and spread > 0.0 and values[best] - values[0] > self.min_gain * spread
                     and np.linalg.norm(candidates[best] - middle) > self.min_distance):
                 hints[name] = candidates[best]
