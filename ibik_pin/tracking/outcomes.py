@@ -76,7 +76,9 @@ def _weighted_rows(tasks: Sequence, configuration: Configuration) -> tuple[np.nd
     return np.vstack(jacobians), np.concatenate(errors)
 
 
-def _outcome(tasks: Sequence, configuration: Configuration, null_basis: np.ndarray, status: str) -> LevelOutcome:
+def _outcome(tasks: Sequence, configuration: Configuration, null_basis: np.ndarray, status: str,
+             rows: tuple[np.ndarray, np.ndarray]) -> LevelOutcome:
+    """One stack level's outcome; `rows`: its _weighted_rows."""
     images = [task.criterion if isinstance(task, CriterionStepTask) else task for task in tasks
               if isinstance(task, (GradientTask, CriterionStepTask))]
     if images:
@@ -88,7 +90,7 @@ def _outcome(tasks: Sequence, configuration: Configuration, null_basis: np.ndarr
         sacrificed = 1.0 - free if np.linalg.norm(direction) > 0.0 else float("nan")
         return LevelOutcome(status, float("nan"), float(np.clip(sacrificed, 0.0, 1.0)),
                             image.compute_value(configuration))
-    A, error = _weighted_rows(tasks, configuration)
+    A, error = rows
     if error.size == 0:
         return LevelOutcome(status, float("nan"), float("nan"), float("nan"))
     residual = float(np.linalg.norm(error))  # sqrt(sum w |e|^2)
@@ -111,15 +113,19 @@ def level_outcomes(plan: StackPlan, configuration: Configuration, reports: Seque
     """
     outcomes: list[LevelOutcome | None] = [None] * len(plan.names)
     null_basis = np.eye(configuration.nv)
+    last = len(plan.solver_levels) - 1
     for solver_level, tasks in enumerate(plan.solver_levels):
+        level_rows = None  # a strict level's rows, which its null space reads too
         for index in range(len(plan.names)):
             if plan.solver_index[index] != solver_level:
                 continue
             at = report_index[index]
             status = reports[at].status if at is not None and at < len(reports) else "empty"
-            outcomes[index] = _outcome(plan.level_tasks[index], configuration, null_basis, status)
-        # The freedom this solver level uses up, as the solvers remove it.
-        if null_basis.shape[1] == 0:
+            rows = _weighted_rows(plan.level_tasks[index], configuration)
+            outcomes[index] = _outcome(plan.level_tasks[index], configuration, null_basis, status, rows)
+            level_rows = rows if list(plan.level_tasks[index]) == list(tasks) else None
+        # The freedom this solver level uses up, as the solvers remove it (none below the last).
+        if null_basis.shape[1] == 0 or solver_level == last:
             continue
         enabled = [task for task in tasks if task.enabled]
         if len(enabled) == 1 and isinstance(enabled[0], GradientTask):
@@ -127,8 +133,11 @@ def level_outcomes(plan: StackPlan, configuration: Configuration, reports: Seque
             if np.linalg.norm(reduced) > RANK_TOLERANCE:
                 null_basis = null_basis @ remove_direction(reduced)
         elif enabled:
-            systems = [task.compute_linear_system(configuration) for task in enabled if isinstance(task, Task)]
-            A = np.vstack([A for A, _ in systems])
+            if level_rows is not None and not any(isinstance(task, CriterionStepTask) for task in enabled):
+                A = level_rows[0]  # the same rows: sqrt(w) J of each enabled task, in order
+            else:
+                A = np.vstack([task.compute_linear_system(configuration)[0] for task in enabled
+                               if isinstance(task, Task)])
             _, remaining = damped_solve(A @ null_basis, np.zeros(A.shape[0]), damping)
             null_basis = null_basis @ remaining
     return [outcome for outcome in outcomes if outcome is not None]
