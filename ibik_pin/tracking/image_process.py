@@ -7,12 +7,13 @@ beside that thread than alone (6.3 against 4.5 ms a frame). A child process has 
 
 How: the parent prepares frame 0 itself, then forks; the child, a copy of the parent at that point
 (the silhouette source with its state, the cameras, nothing pickled), prepares frames 1, 2, ... in
-order. Each frame's arrays (support windows, the silhouettes bit-packed for the rare read outside a
-window, medial axes) are written into one of a few slots of an anonymous shared mapping, and a small
-message through a pipe says where. The parent reads them in place and hands the slot back once two
-more frames have been asked for: a frame's images stay valid while the next frame is set up. An
-array that does not fit its slot travels in the message instead. Per-frame figures the source keeps
-(the silhouette quality report's) come back with each frame.
+order. Each frame's arrays (support windows; the silhouettes bit-packed with their inside
+distances, for a read outside a window; medial axes) are written into one of a few slots of an
+anonymous shared mapping, and a small message through a pipe says where. The parent reads them in
+place and hands the slot back once two more frames have been asked for: a frame's images stay
+valid while the next frame is set up. An array that does not fit its slot travels in the message
+instead. Per-frame figures the source keeps (the silhouette quality report's) come back with each
+frame.
 
 Fork only: on Linux. Elsewhere tracking.frame_images uses a thread.
 """
@@ -36,7 +37,8 @@ import numpy as np
 from ibik_pin.exceptions import IbikError
 from ibik_pin.tasks import View
 from ibik_pin.tasks.silhouette_axis import AxisView
-from ibik_pin.vision.support import SupportImage, WindowedParts, support_from_parts, windowed_parts
+from ibik_pin.vision.support import SupportImage
+from ibik_pin.vision.support_parts import WindowedParts, support_from_parts, windowed_parts
 
 __all__ = ["FrameRecords", "ImageProcess", "can_fork"]
 
@@ -123,6 +125,7 @@ def _pack(images) -> tuple[tuple, list[np.ndarray]]:
         parts = windowed_parts(view.support)
         if parts is not None:  # the arrays by their index in `arrays`
             views.append(("window", add(parts.values), parts.row, parts.column, parts.size, add(parts.mask_bits),
+                          add(parts.inside_values), parts.inside_box, parts.silhouette_box,
                           parts.inside_cap_px, parts.outside_cap_px, parts.smooth_sigma_px))
         else:
             views.append(("values", add(view.support.values), view.support.enabled))
@@ -138,9 +141,9 @@ def _unpack(description: tuple, arrays: list[np.ndarray], cameras: list):
     views = []
     for camera, (kind, values, *fields) in zip(cameras, views_packed, strict=True):
         if kind == "window":
-            row, column, size, bits, inside_cap, outside_cap, sigma = fields
-            support = support_from_parts(WindowedParts(arrays[values], row, column, size, arrays[bits],
-                                                       inside_cap, outside_cap, sigma))
+            row, column, size, bits, inside, inside_box, silhouette_box, inside_cap, outside_cap, sigma = fields
+            support = support_from_parts(WindowedParts(arrays[values], row, column, size, arrays[bits], arrays[inside],
+                                                       inside_box, silhouette_box, inside_cap, outside_cap, sigma))
         else:
             support = SupportImage(arrays[values], enabled=fields[0])
         views.append(View(camera, support))
@@ -150,12 +153,12 @@ def _unpack(description: tuple, arrays: list[np.ndarray], cameras: list):
 
 
 def _slot_bytes(first) -> int:
-    """Room for a frame's arrays: every view's support over the whole frame, its silhouette's bits,
-    and four times the first frame's medial axes."""
+    """Room for a frame's arrays: every view's support and inside distance over the whole frame,
+    its silhouette's bits, and four times the first frame's medial axes."""
     room = 0
     for view in first.views:
         width, height = view.support.size
-        room += 4 * width * height + width * height // 8 + 2 * ALIGNMENT
+        room += 8 * width * height + width * height // 8 + 3 * ALIGNMENT
     if first.axis_views is not None:
         room += sum(4 * axis.pixels.nbytes + 4096 for axis in first.axis_views)
     return room

@@ -265,60 +265,19 @@ def support_from_mask(
     values = np.ascontiguousarray(support_values(region)[shifted(valid, region)])  # read by flat indices
     support = SupportImage._windowed(_Window(values, valid[0].start, valid[1].start), (mask.shape[1], mask.shape[0]),
                                      functools.partial(support_values, None))
-    support._recipe = _Recipe(mask, inside_cap_px, outside_cap_px, smooth_sigma_px)
+    support._recipe = _Recipe(mask, inside, inside_cap_px, outside_cap_px, smooth_sigma_px)
     return support
 
 
 class _Recipe(NamedTuple):
-    """What support_from_mask was given: enough to compute a windowed support's whole frame again."""
+    """What support_from_mask was given: enough to compute a windowed support's whole frame again
+    (vision.support_parts)."""
 
     mask: np.ndarray
+    inside: InsideDistance
     inside_cap_px: float | None
     outside_cap_px: float | None
     smooth_sigma_px: float
-
-
-class WindowedParts(NamedTuple):
-    """A windowed support of support_from_mask as plain arrays and numbers, for another process
-    (tracking.image_process): its window's values (h, w) float32 from (row, column) of a frame of
-    `size` (w, h), and the silhouette as np.packbits of its (H, W) mask with support_from_mask's
-    parameters, from which the whole frame is computed if something reads outside the window."""
-
-    values: np.ndarray
-    row: int
-    column: int
-    size: tuple[int, int]
-    mask_bits: np.ndarray
-    inside_cap_px: float | None
-    outside_cap_px: float | None
-    smooth_sigma_px: float
-
-
-def windowed_parts(support: SupportImage) -> WindowedParts | None:
-    """The parts of a support that support_from_mask holds on a window (None for any other)."""
-    recipe = getattr(support, "_recipe", None)
-    if recipe is None or support._values is not None:
-        return None
-    window = cast(_Window, support._window)
-    return WindowedParts(window.values, window.row, window.column, support.size, np.packbits(recipe.mask),
-                         recipe.inside_cap_px, recipe.outside_cap_px, recipe.smooth_sigma_px)
-
-
-def support_from_parts(parts: WindowedParts) -> SupportImage:
-    """The support of windowed_parts again: the same window values, and the same whole frame. The
-    support keeps parts.values (float32, C order; made read-only), not a copy."""
-    values = parts.values
-    if values.dtype != np.float32 or not values.flags.c_contiguous:
-        raise InputError(f"values: expected a C-ordered float32 window, found {values.dtype}")
-    values.setflags(write=False)
-    return SupportImage._windowed(_Window(values, parts.row, parts.column), parts.size,
-                                  functools.partial(_whole_frame_of_parts, parts))
-
-
-def _whole_frame_of_parts(parts: WindowedParts) -> np.ndarray:
-    width, height = parts.size
-    mask = np.unpackbits(parts.mask_bits, count=width * height).reshape(height, width).view(bool)
-    return support_from_mask(mask, parts.inside_cap_px, parts.outside_cap_px, parts.smooth_sigma_px).values
 
 
 def _support_values(mask: np.ndarray, region: tuple[slice, slice] | None, inside: InsideDistance,
