@@ -196,3 +196,43 @@ def test_without_medial_axes_none_are_built(rig):
     cameras, masks = rig
     images = frame_images(Source(masks), cameras, [4.0, 4.0], None, 0)
     assert images.axis_views is None and len(images.views) == 2
+
+
+def test_target_boxes_hold_every_target_seen_in_front_of_each_camera(rig):
+    from ibik_pin.tracking.views import target_boxes
+
+    cameras, _ = rig
+    rng = np.random.default_rng(4)
+    targets = rng.normal(0.0, 0.3, (6, 5, 3))
+    targets[2] = np.nan  # a frame without targets
+    targets[3, 1:] = np.nan  # a frame with one
+    targets[4, 0] = [8.0, 0.5, 0.0]  # behind the front camera (at x = 4, looking at the origin)
+    boxes = target_boxes(cameras, targets)
+    assert boxes.shape == (6, 2, 4) and boxes.dtype == np.int64
+    assert not boxes[2].any()
+    for frame in (0, 1, 3, 4, 5):
+        for index, camera in enumerate(cameras):
+            points = targets[frame][np.isfinite(targets[frame]).all(axis=1)]
+            projection = camera.project_with_jacobian(points)
+            seen = projection.pixels[projection.depth > 0.0]
+            top, bottom, left, right = boxes[frame, index]
+            width, height = camera.size
+            inside = ((seen[:, 0] >= 0) & (seen[:, 0] <= width - 1) & (seen[:, 1] >= 0) & (seen[:, 1] <= height - 1))
+            pixels = seen[inside]
+            assert np.all((pixels[:, 1] >= top) & (pixels[:, 1] < bottom))
+            assert np.all((pixels[:, 0] >= left) & (pixels[:, 0] < right))
+            assert 0 <= top <= bottom <= height and 0 <= left <= right <= width
+    # The point behind the front camera does not stretch its box.
+    front = target_boxes(cameras[:1], targets[4:5, 1:])
+    assert np.array_equal(target_boxes(cameras[:1], targets[4:5])[0, 0], front[0, 0])
+
+
+def test_frame_images_cover_the_target_boxes_with_the_whole_frames_values(rig):
+    cameras, masks = rig
+    boxes = np.zeros((FRAMES, 2, 4), dtype=np.int64)
+    boxes[:, 0] = [2, 30, 3, 40]  # a corner of the front view, away from the body
+    images = frame_images(Source(masks), cameras, [4.0, 4.0], None, 0, target_boxes=boxes)
+    held, row, column = images.views[0].support.held_values()
+    assert row <= 2 and column <= 3 and row + held.shape[0] >= 30 and column + held.shape[1] >= 40
+    plain = frame_images(Source(masks), cameras, [4.0, 4.0], None, 0)
+    np.testing.assert_array_equal(images.views[0].support.values, plain.views[0].support.values)

@@ -164,3 +164,32 @@ def test_a_windowed_support_reads_no_pixels_as_the_whole_frame_does():
     sample, expected = windowed.sample(np.zeros((0, 2))), whole.sample(np.zeros((0, 2)))
     assert sample.values.shape == (0,) and sample.gradient.shape == (0, 2)
     assert np.array_equal(sample.values, expected.values) and np.array_equal(sample.gradient, expected.gradient)
+
+
+@pytest.mark.parametrize(("size", "smooth_sigma_px"), [((480, 640), 1.0), ((301, 517), 2.0)])
+def test_a_window_that_also_covers_a_box_reads_it_on_the_window_with_the_whole_frames_values(size, smooth_sigma_px):
+    """A partial silhouette and a box where the skeleton is expected beside it (also_around): samples
+    in the box are read on the window, to the whole frame's bits; a box past the frame's edge or
+    empty changes nothing but the window's size."""
+    rng = np.random.default_rng(12)
+    height, width = size
+    checked = 0
+    for mask in random_silhouettes(seed=13, count=30, size=size):
+        top, left = int(rng.integers(0, height - 40)), int(rng.integers(0, width - 40))
+        box = (slice(top, top + int(rng.integers(10, 120))), slice(left, left + int(rng.integers(10, 200))))
+        support = support_from_mask(mask, inside_cap_px=4.0, smooth_sigma_px=smooth_sigma_px, also_around=box)
+        reference = SupportImage(whole_frame_support(mask, 4.0, smooth_sigma_px))
+        inside_box = np.column_stack([rng.uniform(box[1].start, min(box[1].stop, width) - 1, 300),
+                                      rng.uniform(box[0].start, min(box[0].stop, height) - 1, 300)])
+        sample, expected = support.sample(inside_box), reference.sample(inside_box)
+        assert np.array_equal(sample.values, expected.values)
+        assert np.array_equal(sample.gradient, expected.gradient)
+        checked += support._values is None  # read on the window, no whole frame computed
+        held, row, column = support.held_values()
+        if support._values is None:
+            assert row <= box[0].start and column <= box[1].start
+            assert row + held.shape[0] >= min(box[0].stop, height) and column + held.shape[1] >= min(box[1].stop, width)
+        for odd in ((slice(height + 5, height + 50), slice(0, 10)), (slice(20, 20), slice(0, 0))):
+            assert np.array_equal(support_from_mask(mask, 4.0, None, smooth_sigma_px, also_around=odd).values,
+                                  reference.values)
+    assert checked > 15

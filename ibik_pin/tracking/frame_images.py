@@ -47,10 +47,13 @@ class FrameImages:
 
 
 def frame_images(source: Callable[[int], Sequence[np.ndarray]], cameras: Sequence[CameraLike],
-                 caps: Sequence[float], axis_scales: Sequence[float] | None, frame: int) -> FrameImages:
+                 caps: Sequence[float], axis_scales: Sequence[float] | None, frame: int,
+                 target_boxes: np.ndarray | None = None) -> FrameImages:
     """Frame `frame`'s views from its silhouettes: per camera, the overlap criterion's support (its
     inside cap from `caps` [px]) and, when `axis_scales` is given, the medial axis of the
     silhouette-axis term (its robust scale [px]); both read one distance transform of the silhouette.
+    `target_boxes` (F, V, 4): per frame and camera, pixels the support's window covers besides the
+    silhouette (tracking.views.target_boxes).
 
     An empty silhouette gives a disabled view and an empty axis, reported in `disabled` rather than
     warned of (catch_warnings, which would silence support_from_mask's warning, is not thread-safe).
@@ -71,7 +74,12 @@ def frame_images(source: Callable[[int], Sequence[np.ndarray]], cameras: Sequenc
             axes.append(np.zeros((0, 2)))
             continue
         inside = inside_distance(scanned.mask, scanned.box)
-        views.append(View(camera, support_from_mask(scanned, inside_cap_px=caps[index], inside=inside)))
+        around = None
+        if target_boxes is not None:
+            top, bottom, left, right = (int(value) for value in target_boxes[frame, index])
+            around = (slice(top, bottom), slice(left, right))
+        views.append(View(camera, support_from_mask(scanned, inside_cap_px=caps[index], inside=inside,
+                                                    also_around=around)))
         if axis_scales is not None:
             axes.append(medial_axis_pixels(scanned.mask, inside=inside))
     axis_views = (None if axis_scales is None else

@@ -40,7 +40,7 @@ from ibik_pin.tracking.outcomes import level_outcomes
 from ibik_pin.tracking.result import TrackingResult
 from ibik_pin.tracking.stack import CRITERIA, Stack
 from ibik_pin.tracking.swivel import LIMB_ENDS, SwivelSearch, views_cross
-from ibik_pin.tracking.views import initial_configuration, support_caps
+from ibik_pin.tracking.views import initial_configuration, support_caps, target_boxes
 from ibik_pin.vision.segmentation import TemporalMajority
 
 IMAGE_MOVES = ("limbs", "all")
@@ -312,7 +312,8 @@ class Tracker:
         axis_scales = support_caps(self.cameras, configuration.q[:3], self.settings.axis_scale) if use_image else []
         # Frame t + 1's silhouettes are read and its support images built while frame t is solved.
         prepare = None if source is None else functools.partial(
-            frame_images, source, self.cameras, caps, axis_scales if self.settings.criterion == "two-way" else None)
+            frame_images, source, self.cameras, caps, axis_scales if self.settings.criterion == "two-way" else None,
+            target_boxes=target_boxes(self.cameras, targets))
         loop_started = time.perf_counter()
         records = silhouettes if isinstance(silhouettes, FrameRecords) else None
         with FrameImagesAhead(prepare, frame_count, self.settings.read_ahead, records) as images:

@@ -15,7 +15,7 @@ import pinocchio as pin
 from ibik_pin.model import BodyModel
 from ibik_pin.vision.camera import CameraLike
 
-__all__ = ["LIMB_HALF_WIDTH", "initial_configuration", "support_caps"]
+__all__ = ["LIMB_HALF_WIDTH", "initial_configuration", "support_caps", "target_boxes"]
 
 LIMB_HALF_WIDTH = 0.04  # [m] the support's inside cap, in pixels at the subject's distance (docs/method.md)
 
@@ -55,3 +55,36 @@ def support_caps(
         radius = camera.pixel_radius(subject_position[None], np.array([size]))
         caps.append(float(max(radius[0], 1.0)))
     return caps
+
+
+def target_boxes(cameras: Sequence[CameraLike], targets: np.ndarray) -> np.ndarray:
+    """Per frame and camera, the pixel box of the targets in front of the camera, clipped to the
+    image: (F, V, 4) ints (first row, row past the last, first column, column past the last), all
+    zero where none is seen. The skeleton lies around its targets, so a support's window that covers
+    them holds nearly every sample even where the silhouette is partial (frame_images).
+
+    Args:
+        targets: (F, K, 3) [m] in the frame the cameras project; NaN = absent.
+    """
+    frames, count = targets.shape[:2]
+    boxes = np.zeros((frames, len(cameras), 4), dtype=np.int64)
+    flat = targets.reshape(-1, 3)
+    present = np.flatnonzero(np.isfinite(flat).all(axis=1))
+    if present.size == 0:
+        return boxes
+    for index, camera in enumerate(cameras):
+        projection = camera.project_with_jacobian(flat[present])
+        seen = projection.depth > 0.0
+        pixels = np.full((frames * count, 2), np.nan)
+        pixels[present[seen]] = projection.pixels[seen]
+        pixels = pixels.reshape(frames, count, 2)
+        has = np.isfinite(pixels[..., 0]).any(axis=1)
+        if not has.any():
+            continue
+        width, height = camera.size
+        low = np.floor(np.nanmin(pixels[has], axis=1))
+        high = np.ceil(np.nanmax(pixels[has], axis=1)) + 1
+        box = np.stack([np.clip(low[:, 1], 0, height), np.clip(high[:, 1], 0, height),
+                        np.clip(low[:, 0], 0, width), np.clip(high[:, 0], 0, width)], axis=1)
+        boxes[has, index] = box.astype(np.int64)
+    return boxes

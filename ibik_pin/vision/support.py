@@ -213,6 +213,7 @@ def support_from_mask(
     outside_cap_px: float | None = None,
     smooth_sigma_px: float = 1.0,
     inside: InsideDistance | None = None,
+    also_around: tuple[slice, slice] | None = None,
 ) -> SupportImage:
     """The signed-distance support of a silhouette.
 
@@ -227,6 +228,10 @@ def support_from_mask(
         outside_cap_px: truncation of the outside distance [px]; None for none.
         smooth_sigma_px: standard deviation of the Gaussian blur [px]; 0 for none.
         inside: the mask's vision.distance.inside_distance if known (shared with the medial axis).
+        also_around: (rows, columns) of the frame that the window of computed values covers besides
+            the silhouette (where the skeleton is expected: the tracker's projected targets). A read
+            outside the window computes the whole frame, which costs most where silhouettes are
+            partial (background subtraction keeps the moving limbs).
 
     Returns:
         The support [px]. An empty mask gives zeros with ``enabled=False`` and an
@@ -258,7 +263,13 @@ def support_from_mask(
         inside = inside_distance(mask, scanned.box)
     support_values = functools.partial(_support_values, mask, inside=inside, inside_cap_px=inside_cap_px,
                                        outside_cap_px=outside_cap_px, smooth_sigma_px=smooth_sigma_px)
-    window = _window_around(inside.silhouette_box, mask.shape, smooth_sigma_px)
+    box = inside.silhouette_box
+    if also_around is not None:
+        rows, columns = also_around
+        if rows.start < rows.stop and columns.start < columns.stop:  # clipped to the frame by _window_around
+            box = (slice(min(box[0].start, rows.start), max(box[0].stop, rows.stop)),
+                   slice(min(box[1].start, columns.start), max(box[1].stop, columns.stop)))
+    window = _window_around(box, mask.shape, smooth_sigma_px)
     if window is None:
         return SupportImage(support_values(None))
     region, valid = window
