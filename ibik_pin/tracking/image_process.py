@@ -32,6 +32,7 @@ import warnings
 from collections.abc import Callable
 from typing import Protocol, runtime_checkable
 
+import cv2
 import numpy as np
 
 from ibik_pin.exceptions import IbikError
@@ -169,6 +170,9 @@ def _child(prepare: Callable, frame_count: int, connection, slots: _Slots, recor
     frame and ends the loop."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle; it ends the child
     signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not the parent's handler (the CLI's raises an error)
+    # OpenCV's thread pool does not survive a fork (its calls can hang in the child: opencv#5150,
+    # opencv-python#249); without threads its functions run in the calling thread.
+    cv2.setNumThreads(0)
     warnings.simplefilter("ignore")  # the parent reports what matters; the child writes nothing
     free = list(range(SLOTS))
     sent = records.recorded_frames() if records is not None else 0
