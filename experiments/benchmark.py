@@ -9,7 +9,7 @@ Measures in one run:
   2 and 4 views, liegeois, stack and qp: report.json's frames/s (the whole frame loop: silhouettes
   read, support images built, solves) and its frames/s of the solves alone, and the median time of one solver
   step with the image term and of one without (timed around HierarchicalQPSolver.compute_step, in a run
-  on one thread: --no-read-ahead, so that no support image is built beside the step, as none is beside
+  on one thread: --read-ahead off, so that no support image is built beside the step, as none is beside
   Pink's);
 - Pink (`pip install -e '.[bench]'`; skipped without it): one IK step toward the same targets from
   the same configurations (each frame's targets from the previous frame's solution), DAQP and

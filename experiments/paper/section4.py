@@ -257,7 +257,7 @@ def run_chain(
         image_task = ImageTask(body, (), samples_per_segment=8, max_step_size=image_step)
         levels.append([image_task])
         caps = support_caps(views.cameras, clip.keypoint("Hip")[0])
-        # As `ibik track`: each frame's support images built one frame ahead, in a second thread.
+        # As `ibik track`: each frame's support images built ahead (by default in a child process).
         prepare = functools.partial(frame_images, views.masks.__getitem__, views.cameras, caps, None)
     chain_ids = body.frame_ids(list(body.keypoints))  # base, internal joint, end effector
     placements = _base_placements(chain, clip)

@@ -160,11 +160,11 @@ class SilhouetteAxisTask(SegmentCriterion):
         if pose is None or not moves:
             return super().values_at_moves(positions, pose, moves)
         known = cast(list, pose)
-        moving = []
+        moving = []  # each move's rows, candidate by candidate (values_at's frame_positions[:, moved])
         for rows, placed in moves:
-            candidates = np.repeat(positions[None], len(placed), axis=0)
-            candidates[:, rows[0]] = placed
-            moving.append(candidates[:, rows].reshape(-1, 3))
+            points = np.repeat(positions[rows][None], len(placed), axis=0)
+            points[:, 0] = placed
+            moving.append(points.reshape(-1, 3))
         projected = self._pixels(np.concatenate(moving))
         shared = [at_pose[:2] for at_pose in known]
         values, start = [], 0

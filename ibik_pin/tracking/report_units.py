@@ -19,7 +19,8 @@ UNITS = {
     "solve_seconds": "s: wall time of the solves alone (no reading or writing)",
     "solve_frames_per_second": "frames per second of solve_seconds",
     "loop_seconds": ("s: wall time of the whole frame loop: the solves, reading the silhouettes, building the "
-                     "support images and medial axes (one frame ahead, in a second thread), each frame's checks"),
+                     "support images and medial axes (ahead of the solve: by default in a child process), each "
+                     "frame's checks"),
     "frames_per_second": "frames per second of loop_seconds",
     "iterations_per_frame": "solver steps per frame after the first",
     "mean_iterations_per_frame": "solver steps of a frame's main solve, mean over the frames after the first",
