@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pinocchio as pin
+from numba import njit
 
 from ibik_pin.exceptions import InputError
 
@@ -41,34 +42,23 @@ class JointLimits:
                 v_index.append(joint.idx_v)
                 names.append(name)
         self.joint_names = names
-        self.q_index = np.array(q_index, dtype=int)
-        self.v_index = np.array(v_index, dtype=int)
+        self.q_index = np.array(q_index, dtype=np.int64)
+        self.v_index = np.array(v_index, dtype=np.int64)
         self.lower = np.asarray(model.lowerPositionLimit)[self.q_index].copy()
         self.upper = np.asarray(model.upperPositionLimit)[self.q_index].copy()
         self.step = step
 
     def step_bounds(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Bounds on dq for a step from q, each shape (nv,)."""
-        lower_step = -self.step
-        upper_step = self.step.copy()
-        q_limited = q[self.q_index]
-        lower = np.maximum(lower_step[self.v_index], self.lower - q_limited)
-        upper = np.minimum(upper_step[self.v_index], self.upper - q_limited)
-        # Outside the limits by more than one step the box would be empty: land on the limit.
-        empty = lower > upper
-        if empty.any():
-            below = empty & (q_limited < self.lower)
-            above = empty & (q_limited > self.upper)
-            upper = np.where(below, lower, upper)
-            lower = np.where(above, upper, lower)
-        lower_step[self.v_index] = lower
-        upper_step[self.v_index] = upper
-        return lower_step, upper_step
+        lower, upper = np.empty(self.step.shape[0]), np.empty(self.step.shape[0])
+        _step_bounds(np.ascontiguousarray(q, dtype=np.float64), self.q_index, self.v_index, self.lower, self.upper,
+                     self.step, lower, upper)
+        return lower, upper
 
     def clamp(self, q: np.ndarray) -> np.ndarray:
         """q with its limited coordinates clipped into [lower, upper], shape (nq,)."""
-        q = q.copy()
-        q[self.q_index] = np.clip(q[self.q_index], self.lower, self.upper)
+        q = np.array(q, dtype=np.float64)
+        _clamp(q, self.q_index, self.lower, self.upper)
         return q
 
     def violation(self, q: np.ndarray) -> float:
@@ -82,3 +72,29 @@ class JointLimits:
         q_limited = q[self.q_index]
         hit = (q_limited - self.lower < tolerance) | (self.upper - q_limited < tolerance)
         return [name for name, is_hit in zip(self.joint_names, hit, strict=True) if is_hit]
+
+
+# Compiled: both run at every solver step, where their dozen numpy calls cost more than the arithmetic.
+@njit(cache=True, nogil=True)
+def _step_bounds(q, q_index, v_index, lower_limit, upper_limit, step, lower, upper):
+    """lower, upper (nv,) of JointLimits.step_bounds, written in place."""
+    for v in range(step.shape[0]):
+        lower[v], upper[v] = -step[v], step[v]
+    for i in range(q_index.shape[0]):
+        v, value = v_index[i], q[q_index[i]]
+        low = max(-step[v], lower_limit[i] - value)
+        high = min(step[v], upper_limit[i] - value)
+        # Outside the limits by more than one step the box would be empty: land on the limit.
+        if low > high:
+            if value < lower_limit[i]:
+                high = low
+            elif value > upper_limit[i]:
+                low = high
+        lower[v], upper[v] = low, high
+
+
+@njit(cache=True, nogil=True)
+def _clamp(q, q_index, lower_limit, upper_limit):
+    """q's limited coordinates clipped into their limits, in place."""
+    for i in range(q_index.shape[0]):
+        q[q_index[i]] = min(max(q[q_index[i]], lower_limit[i]), upper_limit[i])

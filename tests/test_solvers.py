@@ -638,3 +638,35 @@ def test_stopping_at_the_peak_changes_nothing_without_a_gradient_level(human, so
         runs.append((solver.solve(configuration, levels, iterations=8, stop_at_peak=stop_at_peak), configuration.q))
     assert runs[0][0].iterations == runs[1][0].iterations == 8
     np.testing.assert_array_equal(runs[0][1], runs[1][1])
+
+
+def test_a_plans_packed_levels_are_refilled_step_to_step_and_rebuilt_when_their_layout_changes(human, rng):
+    """StepWorkspace: the next step of the same plan reuses the arrays, holding what a fresh packing
+    holds; another plan, or levels of another shape under the same plan, get a new packing."""
+    from ibik_pin.solvers.base import LevelPlan
+    from ibik_pin.solvers.level_loop import PackedLevels, StepWorkspace
+
+    levels = human_levels(human, random_human_configuration(human, rng))
+    levels.insert(2, [FrameHeight(human, "LElbow")])
+    plan = LevelPlan.of(levels)
+    adaptation = StepAdaptation()
+    workspace = StepWorkspace()
+    configuration = Configuration(human.model, random_human_configuration(human, rng))
+    first = workspace.packed(build_levels(configuration, levels, plan), plan, adaptation, human.model.nv)
+    configuration.update(random_human_configuration(human, rng))
+    built = build_levels(configuration, levels, plan)
+    again = workspace.packed(built, plan, adaptation, human.model.nv)
+    fresh = PackedLevels(built, adaptation, human.model.nv)
+    assert again is first
+    for name in ("kinds", "rows", "targets", "row_starts", "adaptation", "previous", "steps"):
+        np.testing.assert_array_equal(getattr(again, name), getattr(fresh, name))
+    # The same plan object with a level of fewer rows (as a task switched off would give).
+    shorter = list(built)
+    shorter[0] = dataclasses.replace(built[0], A=built[0].A[:3], b=built[0].b[:3])
+    rebuilt = workspace.packed(shorter, plan, adaptation, human.model.nv)
+    assert rebuilt is not first
+    assert rebuilt.rows.shape[0] == fresh.rows.shape[0] - (built[0].A.shape[0] - 3)
+    assert workspace.packed(shorter, plan, adaptation, human.model.nv) is rebuilt
+    assert workspace.packed(shorter, LevelPlan.of(levels), adaptation, human.model.nv) is not rebuilt
+    assert workspace.identity(human.model.nv) is workspace.identity(human.model.nv)
+    np.testing.assert_array_equal(workspace.identity(5), np.eye(5))

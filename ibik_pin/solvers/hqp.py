@@ -41,7 +41,7 @@ from ibik_pin.solvers.base import (
     climbed_value,
     report_levels,
 )
-from ibik_pin.solvers.level_loop import PackedLevels
+from ibik_pin.solvers.level_loop import StepWorkspace
 
 UNBOUNDED = 1e20  # proxsuite's stand-in for an infinite bound
 # How far [rad, m] the active-set answer may leave a bound: as proxsuite's, a bound on a coordinate
@@ -82,6 +82,7 @@ class HierarchicalQPSolver(Solver):
         self.max_qp_iterations = int(max_qp_iterations)
         self.active_set = bool(active_set)
         self._qps: dict[tuple[int, int, int], object] = {}  # (level, n, n_in) -> QP
+        self._workspace = StepWorkspace()
 
     def _qp(self, level: int, n: int, n_in: int):
         """The QP object of this level and size, created once; returns it and whether it is new."""
@@ -107,8 +108,8 @@ class HierarchicalQPSolver(Solver):
             lower, upper = self.limits.step_bounds(configuration.q)
         else:
             lower, upper = np.full(nv, -UNBOUNDED), np.full(nv, UNBOUNDED)
-        packed = PackedLevels(built, self.step_adaptation, nv)
-        dq, null_basis = np.zeros(nv).clip(lower, upper), np.eye(nv)
+        packed = self._workspace.packed(built, plan, self.step_adaptation, nv)
+        dq, null_basis = np.minimum(np.maximum(0.0, lower), upper), self._workspace.identity(nv)
         failed: set[int] = set()
         start = 0
         while start < len(built):

@@ -16,10 +16,12 @@ import numpy as np
 
 from ibik_pin.exceptions import SolverError
 from ibik_pin.solvers.base import GradientLevel, LeastSquaresLevel
-from ibik_pin.solvers.kernels import GRADIENT, LEAST_SQUARES, solve_levels
+from ibik_pin.solvers.kernels import EMPTY, GRADIENT, LEAST_SQUARES, solve_levels
 from ibik_pin.solvers.step_adaptation import StepAdaptation
 
-__all__ = ["PackedLevels"]
+__all__ = ["PackedLevels", "StepWorkspace"]
+
+_NO_TARGET = np.zeros(1)  # a gradient level's (unused) target
 
 
 class PackedLevels:
@@ -32,27 +34,52 @@ class PackedLevels:
     """
 
     def __init__(self, built: list, source: StepAdaptation, nv: int) -> None:
-        self.built = built
         self.source = source
-        self.kinds = np.zeros(len(built), dtype=np.int64)
-        self.row_starts = np.zeros(len(built) + 1, dtype=np.int64)
+        # Per level, its kind and row count, as Python ints: `load` checks the next step's against them.
+        self._layout = tuple(
+            (LEAST_SQUARES, level.A.shape[0]) if isinstance(level, LeastSquaresLevel) else
+            (GRADIENT, 1) if isinstance(level, GradientLevel) else (EMPTY, 0) for level in built)
+        self._gradient_levels = [index for index, (kind, _) in enumerate(self._layout) if kind == GRADIENT]
+        self.kinds = np.array([kind for kind, _ in self._layout], dtype=np.int64)
+        self.row_starts = np.concatenate([[0], np.cumsum([count for _, count in self._layout])]).astype(np.int64)
         self.adaptation = np.zeros((len(built), 4))
         self.previous = np.zeros((len(built), nv))
         self.steps = np.zeros(len(built))
+        self.rows = np.zeros((int(self.row_starts[-1]), nv))
+        self.targets = np.zeros(int(self.row_starts[-1]))
+        self.load(built)
+
+    def load(self, built: list) -> bool:
+        """Take the rows of newly built levels (the next step of the same plan) into the arrays.
+
+        Returns:
+            False, with nothing changed, when their layout is not this one's (a rebuild is needed).
+        """
+        if len(built) != len(self._layout):
+            return False
         blocks, targets = [], []
-        for index, level in enumerate(built):
-            if isinstance(level, LeastSquaresLevel):
-                self.kinds[index] = LEAST_SQUARES
+        for (kind, count), level in zip(self._layout, built, strict=True):
+            if kind == LEAST_SQUARES:
+                if not isinstance(level, LeastSquaresLevel) or level.A.shape[0] != count:
+                    return False
                 blocks.append(level.A)
                 targets.append(level.b)
-            elif isinstance(level, GradientLevel):
-                self.kinds[index] = GRADIENT
+            elif kind == GRADIENT:
+                if not isinstance(level, GradientLevel):
+                    return False
                 blocks.append(level.direction[None])
-                targets.append(np.zeros(1))
-                self.adaptation[index], self.previous[index] = source.state(level.task, nv)
-            self.row_starts[index + 1] = self.row_starts[index] + (blocks[-1].shape[0] if self.kinds[index] else 0)
-        self.rows = np.ascontiguousarray(np.vstack(blocks) if blocks else np.zeros((0, nv)), dtype=np.float64)
-        self.targets = np.ascontiguousarray(np.concatenate(targets) if targets else np.zeros(0), dtype=np.float64)
+                targets.append(_NO_TARGET)
+            elif level is not None:
+                return False
+        if blocks:  # one copy of every level's rows into the arrays the compiled loop reads
+            np.concatenate(blocks, axis=0, out=self.rows)
+            np.concatenate(targets, out=self.targets)
+        nv = self.previous.shape[1]
+        for index in self._gradient_levels:
+            self.adaptation[index], self.previous[index] = self.source.state(built[index].task, nv)
+        self.steps.fill(0.0)
+        self.built = built
+        return True
 
     def solve(self, dq: np.ndarray, null_basis: np.ndarray, lower: np.ndarray, upper: np.ndarray, *,
               bounded: bool, active_set: bool, damping: float, feasibility: float = 0.0, start: int = 0):
@@ -69,8 +96,36 @@ class PackedLevels:
     def finish(self) -> None:
         """Write the gradient levels' adaptation back to their StepAdaptation, and their step norms
         to the built levels (for the reports)."""
-        for index, level in enumerate(self.built):
-            if isinstance(level, GradientLevel):
-                state, previous = self.source.state(level.task, self.previous.shape[1])
-                state[:], previous[:] = self.adaptation[index], self.previous[index]
-                level.step_size = float(self.steps[index])
+        nv = self.previous.shape[1]
+        for index in self._gradient_levels:
+            level = self.built[index]
+            state, previous = self.source.state(level.task, nv)
+            state[:], previous[:] = self.adaptation[index], self.previous[index]
+            level.step_size = float(self.steps[index])
+
+
+class StepWorkspace:
+    """What a solver keeps between the steps of one solve: the PackedLevels of the plan being
+    solved (its arrays refilled at each step instead of allocated) and an identity per size."""
+
+    def __init__(self) -> None:
+        self._plan: object = None
+        self._packed: PackedLevels | None = None
+        self._identities: dict[int, np.ndarray] = {}
+
+    def packed(self, built: list, plan: object, source: StepAdaptation, nv: int) -> PackedLevels:
+        """`built` packed: in the arrays of the plan's previous step when it has one and the same
+        layout, else in new ones (kept for the plan's next step; a step without a plan keeps none)."""
+        packed = self._packed
+        if plan is None or plan is not self._plan or packed is None or packed.source is not source \
+                or packed.previous.shape[1] != nv or not packed.load(built):
+            packed = PackedLevels(built, source, nv)
+            self._plan, self._packed = (plan, packed) if plan is not None else (None, None)
+        return packed
+
+    def identity(self, nv: int) -> np.ndarray:
+        """The (nv, nv) identity, shared: the level loop only reads it."""
+        identity = self._identities.get(nv)
+        if identity is None:
+            identity = self._identities[nv] = np.eye(nv)
+        return identity

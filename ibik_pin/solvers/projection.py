@@ -21,7 +21,9 @@ import functools
 import numpy as np
 
 from ibik_pin.configuration import Configuration
+from ibik_pin.limits import JointLimits
 from ibik_pin.solvers.base import (
+    DEFAULT_DAMPING,
     LevelPlan,
     Levels,
     Solver,
@@ -30,7 +32,7 @@ from ibik_pin.solvers.base import (
     climbed_value,
     report_levels,
 )
-from ibik_pin.solvers.level_loop import PackedLevels
+from ibik_pin.solvers.level_loop import PackedLevels, StepWorkspace
 from ibik_pin.tasks.base import GradientTask, Task
 
 
@@ -41,12 +43,16 @@ class PriorityStackSolver(Solver):
 
     name = "stack"
 
+    def __init__(self, *, limits: JointLimits | None = None, damping: float = DEFAULT_DAMPING) -> None:
+        super().__init__(limits=limits, damping=damping)
+        self._workspace = StepWorkspace()
+
     def compute_step(self, configuration: Configuration, levels: Levels, plan: LevelPlan | None = None) -> StepResult:
         built = build_levels(configuration, plan.levels if plan else self.arrange(levels), plan)
         nv = configuration.nv
-        packed = PackedLevels(built, self.step_adaptation, nv)
+        packed = self._workspace.packed(built, plan, self.step_adaptation, nv)
         if self.limits is None:
-            dq = self._project(packed, np.zeros(nv), np.eye(nv))
+            dq = self._project(packed, np.zeros(nv), self._workspace.identity(nv))
         else:
             # Joint limits by clamping (Baerlocher & Boulic 2004): a coordinate whose step leaves its
             # bounds is locked on the bound and taken out of every level, and the stack is solved
