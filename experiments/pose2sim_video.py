@@ -45,7 +45,7 @@ from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, read_calibration
 from ibik_pin.io.trc import TrcData, read_trc, write_trc
 from ibik_pin.io.video import read_frames
 from ibik_pin.tracking.pipeline import TrackJob, run_track
-from ibik_pin.tracking.tracker import TrackingSettings
+from ibik_pin.tracking.settings import TrackingSettings
 from ibik_pin.tracking.video_inputs import (
     points_inside,
     read_videos,

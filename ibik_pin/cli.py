@@ -113,8 +113,8 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _job(arguments: argparse.Namespace) -> TrackJob:
     from ibik_pin.tracking.pipeline import TrackJob
+    from ibik_pin.tracking.settings import TrackingSettings
     from ibik_pin.tracking.stack import Stack
-    from ibik_pin.tracking.tracker import TrackingSettings
 
     return TrackJob(
         targets=arguments.targets,

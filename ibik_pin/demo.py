@@ -24,7 +24,7 @@ from ibik_pin.synthetic.dataset import write_dataset
 from ibik_pin.synthetic.mocap import keypoints_from_motion, pose_model_to_keypoints
 from ibik_pin.synthetic.rig import humaneva_rig
 from ibik_pin.tracking.pipeline import TrackJob, run_track
-from ibik_pin.tracking.tracker import TrackingSettings
+from ibik_pin.tracking.settings import TrackingSettings
 
 DATA = Path(__file__).resolve().parent / "data"
 

@@ -12,7 +12,7 @@ from ibik_pin.batch.summary import TrialOutcome, write_summary
 from ibik_pin.batch.tasks import SubjectOutcome, calibrate_subject_once, completed_outcome, run_trial
 from ibik_pin.synthetic.trials import write_trial_tree
 from ibik_pin.tracking.pipeline import TrackJob
-from ibik_pin.tracking.tracker import TrackingSettings
+from ibik_pin.tracking.settings import TrackingSettings
 
 
 @pytest.fixture(scope="module")

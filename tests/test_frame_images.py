@@ -159,6 +159,96 @@ def test_a_child_that_dies_is_one_clear_error(rig):
             images.get(2)
 
 
+def _job(frame, images, payload):
+    """A job reading the child's copy of the frame's images: its disabled views and its payload."""
+    return frame, payload, os.getpid(), None if images is None else list(images.disabled)
+
+
+def _offloaded_frames(rig, frames, job=_job, wait_s=0.02):
+    """Run `frames` frames in process mode, each frame's job offloaded where the child is ahead (it
+    is, with a pause per frame); returns the frames offloaded and every result by frame."""
+    import time
+
+    cameras, masks = rig
+    source = Source([masks[frame % FRAMES] for frame in range(frames)])
+    offloaded, results = [], {}
+    with FrameImagesAhead(lambda frame: prepare(source, cameras, frame), frames, "process", job=job) as images:
+        for frame in range(frames):
+            images.get(frame)
+            time.sleep(wait_s)  # the solve: the child gets ahead meanwhile
+            if images.offload(frame, f"payload {frame}"):
+                offloaded.append(frame)
+            results.update(images.results())
+        results.update(images.finish_jobs())
+    return offloaded, results
+
+
+def test_jobs_offloaded_to_the_child_run_there_on_their_frames_images_and_all_come_back(rig):
+    frames = 12
+    offloaded, results = _offloaded_frames(rig, frames)
+    # The child gets as far ahead as its slots allow (two frames) while the parent waits, which it
+    # cannot on the last two frames: none follow.
+    assert set(offloaded) <= set(range(frames - 2)) and len(offloaded) >= frames // 2
+    assert sorted(results) == offloaded
+    for frame in offloaded:
+        done_frame, payload, pid, disabled = results[frame]
+        assert (done_frame, payload) == (frame, f"payload {frame}")
+        assert pid != os.getpid()
+        assert disabled == (["side"] if frame % FRAMES == 2 else [])  # the rig's third frame, on its images
+    assert not _children()
+
+
+def test_a_child_behind_the_parent_gets_no_job(rig):
+    """A child slower than the parent (four large views) would only fall further behind: the
+    parent does the work itself."""
+    import time
+
+    cameras, masks = rig
+    source = Source(masks)
+
+    def slow(frame):
+        time.sleep(0.03)
+        return prepare(source, cameras, frame)
+
+    with FrameImagesAhead(slow, FRAMES, "process", job=_job) as images:
+        for frame in range(FRAMES):
+            images.get(frame)
+            assert not images.offload(frame, None)
+        assert images.finish_jobs() == {}
+
+
+def test_only_the_process_mode_offloads(rig):
+    cameras, masks = rig
+    source = Source(masks)
+    for mode in ("thread", "off"):
+        with FrameImagesAhead(lambda frame: prepare(source, cameras, frame), FRAMES, mode, job=_job) as images:
+            for frame in range(FRAMES):
+                images.get(frame)
+                assert not images.offload(frame, None)
+            assert images.results() == {} and images.finish_jobs() == {}
+
+
+def _failing_job(frame, images, payload):
+    if frame == 3:
+        raise InputError("frame 3: the job failed")
+    return frame
+
+
+def _dying_job(frame, images, payload):
+    if frame == 3:
+        os._exit(5)
+    return frame
+
+
+def test_a_job_that_fails_or_kills_the_child_is_one_clear_error_and_nothing_is_left_running(rig):
+    with pytest.raises(InputError, match="frame 3: the job failed"):
+        _offloaded_frames(rig, 10, _failing_job)
+    assert not _children()
+    with pytest.raises(IbikError, match=r"the process preparing the images ended before .*\(exit code 5\)"):
+        _offloaded_frames(rig, 10, _dying_job)
+    assert not _children()
+
+
 def _mode_in_a_daemon(results) -> None:
     ahead = FrameImagesAhead(lambda frame: None, 2, "process")
     results.put(ahead.mode)

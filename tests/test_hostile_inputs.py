@@ -36,7 +36,7 @@ from ibik_pin.io.trc import read_trc, write_trc
 from ibik_pin.model import human_urdf_path
 from ibik_pin.tracking.outdir import MARKER, OutputFolderError
 from ibik_pin.tracking.pipeline import TrackJob, run_track
-from ibik_pin.tracking.tracker import TrackingSettings
+from ibik_pin.tracking.settings import TrackingSettings
 
 REPOSITORY = Path(__file__).resolve().parents[1]
 

@@ -23,9 +23,10 @@ from ibik_pin.tasks.com import CenterOfMassTask
 from ibik_pin.tasks.criterion_step import CriterionStepTask
 from ibik_pin.tracking.levels import StackPlan
 from ibik_pin.tracking.pipeline import TrackJob, prepare_body
+from ibik_pin.tracking.settings import TrackingSettings
 from ibik_pin.tracking.silhouette_files import load_silhouettes
 from ibik_pin.tracking.stack import Stack
-from ibik_pin.tracking.tracker import Tracker, TrackingSettings
+from ibik_pin.tracking.tracker import Tracker
 from ibik_pin.vision.camera import cameras_in_frame
 
 FRAMES = 8

@@ -11,7 +11,7 @@ from ibik_pin.tracking.axes import AxesChoice, AxesScore
 from ibik_pin.tracking.outcomes import LevelOutcome
 from ibik_pin.tracking.report import ResidualStats, TrackingReport
 from ibik_pin.tracking.result import TrackingResult
-from ibik_pin.tracking.tracker import TrackingSettings
+from ibik_pin.tracking.settings import TrackingSettings
 
 
 def refuse_constant(token):

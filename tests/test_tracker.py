@@ -1,5 +1,7 @@
 """Tests of the Tracker: a short synthetic sequence of the human model, blind and with the image."""
 
+import dataclasses
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -7,7 +9,8 @@ import pytest
 from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError
 from ibik_pin.synthetic.silhouettes import render_silhouettes
-from ibik_pin.tracking.tracker import Tracker, TrackingSettings
+from ibik_pin.tracking.settings import TrackingSettings
+from ibik_pin.tracking.tracker import Tracker
 from ibik_pin.vision.pinhole import look_at_camera
 from tests.conftest import random_human_configuration
 
@@ -103,6 +106,46 @@ def test_reading_ahead_in_a_process_or_a_thread_gives_the_same_motion_as_on_one_
     assert results[2].loop_seconds >= results[2].solve_seconds > 0.0
     with pytest.raises(InputError, match="read_ahead: expected one of process, thread, off"):
         Tracker(human, cameras, fast_settings(read_ahead=True))
+
+
+def test_level_outcomes_computed_in_the_image_process_are_those_computed_in_the_tracker(human, sequence,
+                                                                                          monkeypatch):
+    """The child's copy of the tracker, set as the frame had it (its targets, one dropped; its
+    images; a posture on the previous frame), gives every frame's level outcomes to the bit."""
+    from ibik_pin.tracking.image_process import ImageProcess
+    from ibik_pin.tracking.stack import Stack
+
+    motion, targets = sequence
+    targets = targets.copy()
+    targets[2, TARGETS.index("LWrist")] = np.nan
+    cameras, masks = _two_views(human, motion)
+    stack = Stack.from_dict({"level": [
+        {"tasks": [{"kind": "position"}]},
+        {"tasks": [{"kind": "image"}]},
+        {"tasks": [{"kind": "posture", "reference": "previous", "weight": 0.1}]},
+    ]})
+    settings = fast_settings(iterations=5, first_frame_iterations=20, stack=stack)
+    offloaded = []
+    submit = ImageProcess.submit
+
+    def counted(self, frame, payload):
+        offloaded.append(frame)
+        return submit(self, frame, payload)
+
+    monkeypatch.setattr(ImageProcess, "child_is_ahead", lambda self: True)  # every frame to the child
+    monkeypatch.setattr(ImageProcess, "submit", counted)
+    in_child = Tracker(human, cameras, dataclasses.replace(settings, read_ahead="process")).track(
+        TARGETS, targets, silhouettes=lambda frame: masks[frame])
+    here = Tracker(human, cameras, dataclasses.replace(settings, read_ahead="off")).track(
+        TARGETS, targets, silhouettes=lambda frame: masks[frame])
+    assert offloaded == list(range(FRAMES))
+    np.testing.assert_array_equal(in_child.q, here.q)
+    assert len(in_child.level_outcomes) == FRAMES
+    for child_frame, frame in zip(in_child.level_outcomes, here.level_outcomes, strict=True):
+        assert [outcome.status for outcome in child_frame] == [outcome.status for outcome in frame]
+        np.testing.assert_array_equal([[o.residual, o.sacrificed, o.criterion] for o in child_frame],
+                                      [[o.residual, o.sacrificed, o.criterion] for o in frame])
+    assert np.isfinite(here.level_outcomes[3][2].residual)  # the posture on the previous frame is counted
 
 
 def _two_views(human, motion):

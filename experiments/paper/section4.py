@@ -47,7 +47,8 @@ from ibik_pin.synthetic.silhouettes import render_limb_masks, render_silhouettes
 from ibik_pin.tasks import FramePositionTask, ImageTask
 from ibik_pin.tracking.first_frame import solve_first_frame
 from ibik_pin.tracking.frame_images import FrameImagesAhead, frame_images
-from ibik_pin.tracking.tracker import Tracker, TrackingSettings
+from ibik_pin.tracking.settings import TrackingSettings
+from ibik_pin.tracking.tracker import Tracker
 from ibik_pin.tracking.views import support_caps
 from ibik_pin.vision.segmentation import TemporalMajority
 

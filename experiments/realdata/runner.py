@@ -30,7 +30,7 @@ from paper.section4 import DEFECT_MASK_FILTER_RADIUS
 from ibik_pin.exceptions import InputError, UnknownNameError
 from ibik_pin.io.trc import read_trc, write_trc
 from ibik_pin.tracking.pipeline import TrackJob, run_track
-from ibik_pin.tracking.tracker import TrackingSettings
+from ibik_pin.tracking.settings import TrackingSettings
 from realdata.clips import CLIPS, ESTIMATED
 from realdata.inputs import CONDITIONS, ClipInputs, prepare_inputs
 

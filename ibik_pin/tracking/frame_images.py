@@ -100,14 +100,15 @@ class FrameImagesAhead:
     when asked, in the caller's thread). The process mode needs the frames asked in order, and a
     frame's arrays are the child's shared memory, valid until two more frames have been asked for;
     `records` is the silhouette source whose per-frame figures the child sends back
-    (image_process.FrameRecords), if any.
+    (image_process.FrameRecords), if any. `job(frame, images, payload)`: work that `offload` hands
+    to the child process when it is ahead (the caller does it itself otherwise, or in another mode).
 
     Use as a context manager: leaving it (also by an exception or a signal) cancels the frames
     prepared ahead and waits for one being prepared (a thread), or ends the child process.
     """
 
     def __init__(self, prepare: Callable[[int], FrameImages] | None, frame_count: int, mode: str = "process",
-                 records: FrameRecords | None = None) -> None:
+                 records: FrameRecords | None = None, job: Callable | None = None) -> None:
         if mode not in READ_AHEAD_MODES:
             raise InputError(f"read-ahead mode: expected one of {', '.join(READ_AHEAD_MODES)}, got {mode!r}")
         if mode == "process" and not can_fork():
@@ -116,6 +117,7 @@ class FrameImagesAhead:
         self._frame_count = frame_count
         self._mode = mode
         self._records = records
+        self._job = job
         self._entered = False
         self._executor: ThreadPoolExecutor | None = None
         self._process: ImageProcess | None = None
@@ -131,7 +133,7 @@ class FrameImagesAhead:
         if self._prepare is not None and self._mode == "thread":
             self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="ibik-frame-images")
         elif self._prepare is not None and self._mode == "process":
-            self._process = ImageProcess(self._prepare, self._frame_count, self._records)
+            self._process = ImageProcess(self._prepare, self._frame_count, self._records, self._job)
         return self
 
     def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
@@ -161,3 +163,17 @@ class FrameImagesAhead:
         if frame + 1 < self._frame_count and frame + 1 not in self._ahead:
             self._ahead[frame + 1] = self._executor.submit(self._prepare, frame + 1)
         return future.result()
+
+    def offload(self, frame: int, payload: object) -> bool:
+        """Hand job(frame, images, payload) to the child process if it is ahead of the caller; False
+        (nothing handed) otherwise: the caller does the work itself. Call after get(frame)."""
+        return (self._process is not None and self._process.child_is_ahead()
+                and self._process.submit(frame, payload))
+
+    def results(self) -> dict[int, object]:
+        """The results of the jobs offloaded so far that have come back and were not yet taken, by frame."""
+        return self._process.results() if self._process is not None else {}
+
+    def finish_jobs(self) -> dict[int, object]:
+        """Wait for every job offloaded; the results not yet taken, by frame."""
+        return self._process.finish_jobs() if self._process is not None else {}

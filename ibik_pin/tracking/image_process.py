@@ -15,11 +15,18 @@ valid while the next frame is set up. An array that does not fit its slot travel
 instead. Per-frame figures the source keeps (the silhouette quality report's) come back with each
 frame.
 
+The child also runs jobs the parent sends (`submit`): a job reads a frame's images and whatever
+the child's copy of the parent's objects holds, and only needs the child to have those images. The
+tracker sends it each frame's level outcomes (tracking.outcomes), work of about 0.7 ms a frame that
+needs the frame's solution but nothing of the next frame's solve, while the child, which prepares
+two views in less time than the parent solves them, would otherwise wait.
+
 Fork only: on Linux. Elsewhere tracking.frame_images uses a thread.
 """
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import mmap
 import multiprocessing
@@ -49,6 +56,9 @@ SLOTS = 4
 HELD = 2
 ALIGNMENT = 64  # bytes; each array starts on a cache line
 _STOP_WAIT_S = 5.0
+# Frames whose images the child keeps for jobs: a job comes for a frame the parent has solved, at
+# most SLOTS frames behind the newest the child prepared.
+KEPT_FOR_JOBS = 2 * SLOTS + 2
 
 
 def can_fork() -> bool:
@@ -162,12 +172,13 @@ def _slot_bytes(first) -> int:
         room += 8 * width * height + width * height // 8 + 3 * ALIGNMENT
     if first.axis_views is not None:
         room += sum(4 * axis.pixels.nbytes + 4096 for axis in first.axis_views)
-    return room
+    return max(room, ALIGNMENT)
 
 
-def _child(prepare: Callable, frame_count: int, connection, slots: _Slots, records: FrameRecords | None) -> None:
-    """The child's loop: frames 1 .. frame_count - 1, each into a free slot; an error is sent at its
-    frame and ends the loop."""
+def _child(prepare: Callable, frame_count: int, connection, slots: _Slots, records: FrameRecords | None,
+           job: Callable | None, first) -> None:
+    """The child's loop: frames 1 .. frame_count - 1, each into a free slot, and the jobs the parent
+    sends, until the parent closes its end; an error is sent at its frame and ends the loop."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle; it ends the child
     signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not the parent's handler (the CLI's raises an error)
     # OpenCV's thread pool does not survive a fork (its calls can hang in the child: opencv#5150,
@@ -175,6 +186,22 @@ def _child(prepare: Callable, frame_count: int, connection, slots: _Slots, recor
     cv2.setNumThreads(0)
     warnings.simplefilter("ignore")  # the parent reports what matters; the child writes nothing
     free = list(range(SLOTS))
+    kept = {0: first}  # the images of the last frames prepared, for the jobs
+
+    def handle(message) -> bool:
+        """A slot handed back, or a job run and its result sent; False after a failed job."""
+        if not isinstance(message, tuple):
+            free.append(message)
+            return True
+        _, frame, payload = message
+        try:
+            result = job(frame, kept.get(frame), payload)  # type: ignore[misc]
+        except BaseException as error:
+            connection.send(("error", frame, _picklable(error)))
+            return False
+        connection.send(("result", frame, result))
+        return True
+
     sent = records.recorded_frames() if records is not None else 0
     for frame in range(1, frame_count):
         try:
@@ -182,8 +209,11 @@ def _child(prepare: Callable, frame_count: int, connection, slots: _Slots, recor
         except BaseException as error:  # every failure goes to the parent, at its frame
             connection.send(("error", frame, _picklable(error)))
             return
+        kept[frame] = images
+        kept.pop(frame - KEPT_FOR_JOBS, None)
         while not free:
-            free.append(connection.recv())
+            if not handle(connection.recv()):
+                return
         slot = free.pop()
         description, arrays = _pack(images)
         news = None
@@ -192,6 +222,18 @@ def _child(prepare: Callable, frame_count: int, connection, slots: _Slots, recor
             news = (sent, records.records(sent, stop))
             sent = stop
         connection.send(("frame", frame, slot, description, slots.write(slot, arrays), news))
+        while connection.poll():  # jobs sent meanwhile, before the next frame
+            if not handle(connection.recv()):
+                return
+    if job is None:
+        return
+    while True:  # every frame sent: the jobs left, until the parent closes its end
+        try:
+            message = connection.recv()
+        except (EOFError, OSError):
+            return
+        if not handle(message):
+            return
 
 
 def _picklable(error: BaseException) -> BaseException:
@@ -205,11 +247,18 @@ def _picklable(error: BaseException) -> BaseException:
 class ImageProcess:
     """Frames 0 .. frame_count - 1 of `prepare(frame)` (FrameImages), asked for in order: frame 0
     prepared here, the others in a forked child; the views of later frames get frame 0's camera
-    objects. `records`: the source whose per-frame figures the child sends back, or None. Call
-    close() when done (also after an error)."""
+    objects. `records`: the source whose per-frame figures the child sends back, or None. `job`:
+    job(frame, images, payload) -> result, run in the child for each `submit` (images: that frame's
+    FrameImages, or None if the child no longer keeps them); its results are picked up by `results`
+    and `finish_jobs`. Call close() when done (also after an error)."""
 
-    def __init__(self, prepare: Callable, frame_count: int, records: FrameRecords | None = None) -> None:
+    def __init__(self, prepare: Callable, frame_count: int, records: FrameRecords | None = None,
+                 job: Callable | None = None) -> None:
         self._prepare, self._frame_count = prepare, frame_count
+        self._job = job
+        self._results: dict[int, object] = {}
+        self._outstanding = 0
+        self._waiting: collections.deque = collections.deque()  # the child's messages read ahead
         self._cameras: list = []
         self._records = records
         self._next = 0
@@ -227,11 +276,12 @@ class ImageProcess:
             first = self._prepare(0)
             self._cameras = [view.camera for view in first.views]
             if self._frame_count > 1:
-                self._start(_slot_bytes(first))
+                self._start(first)
             return first
         return self._receive(frame)
 
-    def _start(self, slot_bytes: int) -> None:
+    def _start(self, first) -> None:
+        slot_bytes = _slot_bytes(first)
         self._memory = mmap.mmap(-1, SLOTS * slot_bytes)  # anonymous and shared: the child writes into it
         self._slots = _Slots(self._memory, slot_bytes)
         context = multiprocessing.get_context("fork")
@@ -240,23 +290,43 @@ class ImageProcess:
             stream.flush()
         self._process = context.Process(target=_child, name="ibik-frame-images", daemon=True,
                                         args=(self._prepare, self._frame_count, child_end, self._slots,
-                                              self._records))
+                                              self._records, self._job, first))
         self._process.start()
         child_end.close()
 
+    def _next_message(self, waiting_for: str, results_only: bool = False):
+        """The child's next message other than a job result (results_only: the next job result),
+        job results kept aside; raises the child's error, or an IbikError if it ended."""
+        assert self._connection is not None
+        while True:
+            if self._waiting and not results_only:
+                message = self._waiting.popleft()
+            else:
+                try:
+                    message = self._connection.recv()
+                except (EOFError, OSError):  # the pipe closed, or reset (a socket pair) by the child's end
+                    if self._process is not None:
+                        self._process.join(_STOP_WAIT_S)
+                    code = self._process.exitcode if self._process is not None else None
+                    raise IbikError(f"the process preparing the images ended before {waiting_for} "
+                                    f"(exit code {code})") from None
+            if message[0] == "error":
+                raise message[2]
+            if message[0] != "result":
+                if results_only:
+                    raise RuntimeError(f"ImageProcess: a {message[0]!r} message while finishing the jobs")
+                return message
+            self._take_result(message)
+            if results_only:
+                return message
+
+    def _take_result(self, message: tuple) -> None:
+        self._results[message[1]] = message[2]
+        self._outstanding -= 1
+
     def _receive(self, frame: int):
         assert self._connection is not None and self._slots is not None
-        try:
-            message = self._connection.recv()
-        except (EOFError, OSError):  # the pipe closed, or reset (a socket pair) by the child's end
-            if self._process is not None:
-                self._process.join(_STOP_WAIT_S)
-            code = self._process.exitcode if self._process is not None else None
-            raise IbikError(f"the process preparing the images ended before frame {frame} "
-                            f"(exit code {code})") from None
-        if message[0] == "error":
-            raise message[2]
-        _, sent_frame, slot, description, places, news = message
+        _, sent_frame, slot, description, places, news = self._next_message(f"frame {frame}")
         if sent_frame != frame:
             raise RuntimeError(f"ImageProcess: received frame {sent_frame}, expected {frame}")
         # The frame's arrays are read in place: its slot goes back to the child once two more frames
@@ -269,6 +339,45 @@ class ImageProcess:
         if news is not None and self._records is not None:
             self._records.add_records(*news)
         return _unpack(description, arrays, self._cameras)
+
+    def child_is_ahead(self) -> bool:
+        """Whether the child has prepared as many frames ahead as its slots allow (it then waits for
+        the parent): a job sent now costs the parent nothing it would not spend waiting. With fewer
+        frames ready the child is keeping pace at best (four large views), and the parent had
+        better do the work itself."""
+        if self._connection is None:
+            return False
+        with contextlib.suppress(EOFError, OSError):  # a child that ended is found out at the next frame
+            while self._connection.poll():
+                message = self._connection.recv()
+                if message[0] == "result":
+                    self._take_result(message)
+                else:  # frames and errors, in order, for _next_message
+                    self._waiting.append(message)
+        return sum(message[0] == "frame" for message in self._waiting) >= SLOTS - HELD
+
+    def submit(self, frame: int, payload: object) -> bool:
+        """Send `job(frame, images, payload)` to the child; False (nothing sent) without a child or
+        a job, or once the child has ended."""
+        if self._job is None or self._connection is None or self._process is None:
+            return False
+        try:
+            self._connection.send(("job", frame, payload))
+        except OSError:
+            return False
+        self._outstanding += 1
+        return True
+
+    def results(self) -> dict[int, object]:
+        """The job results received so far and not yet taken, by frame."""
+        results, self._results = self._results, {}
+        return results
+
+    def finish_jobs(self) -> dict[int, object]:
+        """Wait for every job submitted; their results not yet taken, by frame."""
+        while self._outstanding > 0:
+            self._next_message("the results of its last jobs", results_only=True)
+        return self.results()
 
     def close(self) -> None:
         """End the child (at once if frames are left) and free the shared memory."""

@@ -42,8 +42,9 @@ from ibik_pin.tracking.input_checks import (
 from ibik_pin.tracking.outdir import check_outdir, make_staging, publish
 from ibik_pin.tracking.report import TrackingReport
 from ibik_pin.tracking.result import TrackingResult
+from ibik_pin.tracking.settings import TrackingSettings
 from ibik_pin.tracking.silhouette_files import Silhouettes, camera_folder_entries, fit_to_size, load_silhouettes
-from ibik_pin.tracking.tracker import Tracker, TrackingSettings
+from ibik_pin.tracking.tracker import Tracker
 from ibik_pin.tracking.video_inputs import (
     SEGMENTERS,
     SilhouetteQuality,

@@ -21,7 +21,7 @@ from ibik_pin.io.files import json_ready, strict_json, write_text_atomically
 from ibik_pin.tracking.axes import AXES_DESCRIPTIONS, AxesChoice
 from ibik_pin.tracking.report_units import FRAME_NUMBERING, UNITS
 from ibik_pin.tracking.result import TrackingResult
-from ibik_pin.tracking.tracker import TrackingSettings
+from ibik_pin.tracking.settings import TrackingSettings
 from ibik_pin.tracking.video_inputs import SilhouetteQuality, TriangulationReport
 from ibik_pin.vision.extrinsics_refit import ExtrinsicsRefit
 

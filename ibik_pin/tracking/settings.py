@@ -1,0 +1,93 @@
+"""How the tracker solves each frame (tracking.tracker.Tracker): TrackingSettings, the choices it
+offers, and their defaults."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ibik_pin.tracking.stack import Stack
+
+__all__ = ["IMAGE_MOVES", "IMAGE_STOPS", "TrackingSettings"]
+
+# Which coordinates a frame's image steps move (TrackingSettings.image_moves).
+IMAGE_MOVES = ("limbs", "all")
+# Where a frame's image steps end (TrackingSettings.image_stop).
+IMAGE_STOPS = ("peak", "count")
+
+
+@dataclass
+class TrackingSettings:
+    """How each frame is solved.
+
+    Attributes:
+        method: solver scheme: "qp" (default), "stack", "liegeois" or "ik".
+        iterations: solver steps per frame (the paper: 15).
+        first_frame_iterations: steps for the first frame, which starts from the neutral pose:
+            that many blind (no image) then that many with every level.
+        first_frame_starts: starts of the first frame (see solve_first_frame). One by default:
+            on the whole body, random starts of every joint at once found higher-overlap but wrong
+            poses (boxing: elbows and knees 122 mm off against 44 mm from the neutral pose); the
+            6-DOF chains of experiments/paper_tables.py use 8.
+        use_image: False gives the blind baseline (PIK with "qp"/"stack", IK with "ik").
+        samples_per_segment: n of eq. (5).
+        image_step: largest image step per iteration [rad].
+        posture_weight: weight of the posture prior (lowest level).
+        mask_filter_radius: with r > 0, each silhouette pixel is the majority over the 2r + 1
+            frames around it (images.TemporalMajority), removing one-frame segmentation flicker.
+        criterion: "two-way" (default): the overlap of eq. (5)-(6) plus
+            `axis_weight` times the silhouette-axis term (tasks.silhouette_axis), which asks the
+            skeleton to explain the silhouette's medial axis as well; "paper": the overlap alone.
+        axis_weight: weight of the silhouette-axis term in the two-way criterion.
+        axis_scale: the axis term's robust scale [m] at the subject's distance: an axis sample
+            farther than about this from every projected segment stops pulling.
+        swivel_search: once each frame's targets are met, sample the swivel circle of every free
+            elbow and knee on the image criterion and hold each at a clearly better sample, below
+            the targets, for the frame's image steps (tracking.swivel): recovers limbs that fast
+            motion threw into another basin of the criterion. Runs only when two views cross.
+            With the trunk held (image_moves) it brought the real-mocap benchmark's boxing elbows
+            from about 100 mm to under 20 mm (2 views; README).
+        feet_by_ankle: toe and heel targets move only the joints that do not move their ankle
+            (ibik_pin.feet.foot_point_joints); False lets them move the whole leg, as a plain
+            end-effector target does.
+        image_moves: "limbs" (default): each frame first takes `target_iterations` steps on the
+            targets alone, then holds the root, spine, clavicles and neck where those left them
+            (BodyModel.limb_coordinates) for the steps with the image, so the image moves only
+            the arms and legs; "all": the paper's scheme, every step with every level.
+        target_iterations: the targets-only steps of each frame with image_moves="limbs".
+        step_tolerance: stop a frame's main solve (the image steps, or the blind steps without
+            the image) once a step's norm |dq| falls below this [rad]; None: always `iterations`.
+        image_stop: where a frame's image steps end. "peak" (default): once the image criterion
+            no longer rises from one step to the next, back at the best of the two, or after
+            `iterations` steps (Solver.solve's stop_at_peak); "count": always `iterations` steps,
+            as in the paper. On the real-motion benchmark (2 views) "peak" took 4.7-8.0 steps a
+            frame instead of 15, and all four elbows and knees went 12.2 -> 11.7 mm; on the real
+            video (experiments/pose2sim_video.py) it kept climbing where the criterion still rose.
+        stack: the priority levels and their tasks (tracking.stack); None: Stack.default(). An
+            image task's criterion, step and views, when the stack gives them, replace
+            `criterion`, `image_step` and the cameras; a posture task's weight `posture_weight`.
+        read_ahead: where each frame's silhouettes are read and its support images built while
+            the frame before is solved (tracking.frame_images): "process" (a forked child; a thread
+            where fork is not available, off Linux), "thread", or "off" (in turn, on one thread:
+            ibik batch's workers, one per core). The results are the same.
+    """
+
+    method: str = "qp"
+    iterations: int = 15
+    first_frame_iterations: int = 100
+    first_frame_starts: int = 1
+    use_image: bool = True
+    samples_per_segment: int = 6
+    image_step: float = 0.05
+    posture_weight: float = 1e-2
+    mask_filter_radius: int = 0
+    criterion: str = "two-way"
+    axis_weight: float = 1.0
+    axis_scale: float = 0.10
+    swivel_search: bool = True
+    feet_by_ankle: bool = True
+    image_moves: str = "limbs"
+    target_iterations: int = 5
+    step_tolerance: float | None = None
+    image_stop: str = "peak"
+    stack: Stack | None = None
+    read_ahead: str = "process"
