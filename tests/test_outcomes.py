@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 
 from ibik_pin.configuration import Configuration
-from ibik_pin.solvers import LevelReport
 from ibik_pin.tasks import FramePositionTask
 from ibik_pin.tasks.base import GradientTask
 from ibik_pin.tracking.levels import StackPlan
@@ -30,8 +29,8 @@ def outcomes_of(levels, names, configuration):
     image = next((level[0] for level in levels if isinstance(level[0], GradientTask)), None)
     plan = StackPlan(names, levels, levels, list(range(len(levels))),
                      None if image is None else [level[0] for level in levels].index(image), image)
-    reports = [LevelReport("tasks", 0.0, np.nan, status) for status in ["solved", "relaxed", "relaxed", "solved"]]
-    return level_outcomes(plan, configuration, reports[:len(levels)], list(range(len(levels))), damping=3e-2)
+    statuses = ["solved", "relaxed", "relaxed", "solved"]
+    return level_outcomes(plan, configuration, statuses[:len(levels)], list(range(len(levels))), damping=3e-2)
 
 
 def test_a_target_fighting_a_higher_one_for_the_same_point_is_wholly_sacrificed(human, rng):

@@ -26,7 +26,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ibik_pin.configuration import Configuration
-from ibik_pin.solvers import LevelReport
 from ibik_pin.solvers.nullspace import RANK_TOLERANCE, damped_solve, range_residual, remove_direction
 from ibik_pin.tasks.base import GradientTask, Task
 from ibik_pin.tasks.criterion_step import CriterionStepTask
@@ -100,15 +99,16 @@ def _outcome(tasks: Sequence, configuration: Configuration, null_basis: np.ndarr
     return LevelOutcome(status, residual, float(np.clip(lost, 0.0, residual)), float("nan"))
 
 
-def level_outcomes(plan: StackPlan, configuration: Configuration, reports: Sequence[LevelReport],
+def level_outcomes(plan: StackPlan, configuration: Configuration, statuses: Sequence[str],
                    report_index: Sequence[int | None], damping: float) -> list[LevelOutcome]:
     """Every stack level's outcome at the configuration (the frame's solution).
 
     Args:
         plan: the stack as solved.
         configuration: the frame's solution.
-        reports: the solver's level reports of the frame solve's last step.
-        report_index: per stack level, its index in `reports` (StackPlan.report_index).
+        statuses: the statuses of the solver's level reports (LevelReport.status) of the frame
+            solve's last step.
+        report_index: per stack level, its index in `statuses` (StackPlan.report_index).
         damping: the solver's damping, for the null spaces as the solver counts them.
     """
     outcomes: list[LevelOutcome | None] = [None] * len(plan.names)
@@ -120,7 +120,7 @@ def level_outcomes(plan: StackPlan, configuration: Configuration, reports: Seque
             if plan.solver_index[index] != solver_level:
                 continue
             at = report_index[index]
-            status = reports[at].status if at is not None and at < len(reports) else "empty"
+            status = statuses[at] if at is not None and at < len(statuses) else "empty"
             rows = _weighted_rows(plan.level_tasks[index], configuration)
             outcomes[index] = _outcome(plan.level_tasks[index], configuration, null_basis, status, rows)
             level_rows = rows if list(plan.level_tasks[index]) == list(tasks) else None

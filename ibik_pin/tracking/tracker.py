@@ -282,28 +282,30 @@ class Tracker:
                 result.limit_hits.append(self.limits.at_limit(configuration.q))
                 # The level outcomes: in the image process's child when it is ahead (the same values,
                 # from its copy of this tracker), else here.
-                if images.offload(frame, (frame_start, configuration.q.copy(), solved.levels)):
+                statuses = tuple(report.status for report in solved.levels)
+                if images.offload(frame, (frame_start, configuration.q.copy(), statuses)):
                     result.level_outcomes.append([])  # filled when the child's answer comes back
                 else:
-                    result.level_outcomes.append(level_outcomes(plan, configuration, solved.levels, report_index,
+                    result.level_outcomes.append(level_outcomes(plan, configuration, statuses, report_index,
                                                                 self.solver.damping))
                 for done, outcomes in images.results().items():
-                    result.level_outcomes[done] = cast(list[LevelOutcome], outcomes)
+                    result.level_outcomes[done] = [LevelOutcome(*fields) for fields in cast(list, outcomes)]
                 if progress is not None:
                     progress()
             for done, outcomes in images.finish_jobs().items():
-                result.level_outcomes[done] = cast(list[LevelOutcome], outcomes)
+                result.level_outcomes[done] = [LevelOutcome(*fields) for fields in cast(list, outcomes)]
         result.loop_seconds = time.perf_counter() - loop_started
         return result
 
     def _outcomes_in_copy(self, plan: StackPlan, names: list[str], targets: np.ndarray, report_index: list,
                           configuration: Configuration, frame: int, images: FrameImages | None,
-                          payload: tuple) -> list[LevelOutcome]:
+                          payload: tuple) -> list[tuple]:
         """A frame's level_outcomes in the image process's child (FrameImagesAhead.offload), on its
         copy of this tracker set as track() had it at the frame's solution: the frame's targets, its
         images, the postures' previous-frame reference. `payload`: q at the frame's start, its
-        solution, the solver's level reports."""
-        frame_start, solution, reports = payload
+        solution, the statuses of the solver's level reports. Each outcome comes back as the tuple
+        of its fields (a tenth of a dataclass's unpickling time)."""
+        frame_start, solution, statuses = payload
         if images is None:
             raise RuntimeError(f"the images of frame {frame} are no longer kept for its level outcomes")
         present = np.all(np.isfinite(targets[frame]), axis=1)
@@ -317,7 +319,8 @@ class Tracker:
         configuration.update(frame_start)
         self.tasks.start_frame(configuration)
         configuration.update(solution)
-        return level_outcomes(plan, configuration, reports, report_index, self.solver.damping)
+        return [dataclasses.astuple(outcome)
+                for outcome in level_outcomes(plan, configuration, statuses, report_index, self.solver.damping)]
 
     def _overlap_per_view(self, configuration: Configuration, disabled: list[str]) -> tuple[np.ndarray, np.ndarray]:
         """Per view, the mean support at the skeleton's sample points [px] and the fraction inside [0-1]."""
