@@ -56,9 +56,10 @@ SLOTS = 4
 HELD = 2
 ALIGNMENT = 64  # bytes; each array starts on a cache line
 _STOP_WAIT_S = 5.0
-# Frames whose images the child keeps for jobs: a job comes for a frame the parent has solved, at
-# most SLOTS frames behind the newest the child prepared.
-KEPT_FOR_JOBS = 2 * SLOTS + 2
+# Frames whose images the child keeps for jobs. A job comes for the frame the parent has just
+# solved, t: the parent then holds the slots of t - 1 and t, so the child has sent t + 2 at most and
+# prepared t + 3; jobs come in order, so the frames up to a job's are dropped with it.
+KEPT_FOR_JOBS = SLOTS + 2
 
 
 def can_fork() -> bool:
@@ -200,6 +201,8 @@ def _child(prepare: Callable, frame_count: int, connection, slots: _Slots, recor
             connection.send(("error", frame, _picklable(error)))
             return False
         connection.send(("result", frame, result))
+        for done in [kept_frame for kept_frame in kept if kept_frame <= frame]:
+            del kept[done]
         return True
 
     sent = records.recorded_frames() if records is not None else 0
