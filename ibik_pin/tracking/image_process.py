@@ -16,10 +16,11 @@ instead. Per-frame figures the source keeps (the silhouette quality report's) co
 frame.
 
 The child also runs jobs the parent sends (`submit`): a job reads a frame's images and whatever
-the child's copy of the parent's objects holds, and only needs the child to have those images. The
-tracker sends it each frame's level outcomes (tracking.outcomes), work of about 0.7 ms a frame that
-needs the frame's solution but nothing of the next frame's solve, while the child, which prepares
-two views in less time than the parent solves them, would otherwise wait.
+the child's copy of the parent's objects holds. The tracker sends it a frame's level outcomes
+(tracking.outcomes), about 0.7 ms of work that needs the frame's solution but nothing of the next
+frame's solve, when the child is ahead (`child_is_ahead`): with two views it prepares a frame in
+less time than the parent solves one, and would otherwise wait; with four it is the slower one,
+and the parent keeps the work.
 
 Fork only: on Linux. Elsewhere tracking.frame_images uses a thread.
 """
