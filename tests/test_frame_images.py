@@ -2,6 +2,7 @@
 views as prepared in turn, frames read in order and once, errors raised at their frame, nothing
 left running after the loop."""
 
+import functools
 import multiprocessing
 import os
 import threading
@@ -228,9 +229,9 @@ def test_only_the_process_mode_offloads(rig):
             assert images.results() == {} and images.finish_jobs() == {}
 
 
-def _failing_job(frame, images, payload):
-    if frame == 3:
-        raise InputError("frame 3: the job failed")
+def _failing_job(frame, images, payload, failing=(3,)):
+    if frame in failing:
+        raise InputError(f"frame {frame}: the job failed")
     return frame
 
 
@@ -243,6 +244,10 @@ def _dying_job(frame, images, payload):
 def test_a_job_that_fails_or_kills_the_child_is_one_clear_error_and_nothing_is_left_running(rig):
     with pytest.raises(InputError, match="frame 3: the job failed"):
         _offloaded_frames(rig, 10, _failing_job)
+    assert not _children()
+    # The last job offloaded (frame 7 of 10) failing: its error is the one raised, after the frames.
+    with pytest.raises(InputError, match="frame 7: the job failed"):
+        _offloaded_frames(rig, 10, functools.partial(_failing_job, failing=(7,)))
     assert not _children()
     with pytest.raises(IbikError, match=r"the process preparing the images ended before .*\(exit code 5\)"):
         _offloaded_frames(rig, 10, _dying_job)

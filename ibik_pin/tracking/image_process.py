@@ -188,7 +188,7 @@ def _child(prepare: Callable, frame_count: int, connection, slots: _Slots, recor
     cv2.setNumThreads(0)
     warnings.simplefilter("ignore")  # the parent reports what matters; the child writes nothing
     free = list(range(SLOTS))
-    kept = {0: first}  # the images of the last frames prepared, for the jobs
+    kept = {0: first} if job is not None else {}  # the images of the last frames prepared, for the jobs
 
     def handle(message) -> bool:
         """A slot handed back, or a job run and its result sent; False after a failed job."""
@@ -213,8 +213,9 @@ def _child(prepare: Callable, frame_count: int, connection, slots: _Slots, recor
         except BaseException as error:  # every failure goes to the parent, at its frame
             connection.send(("error", frame, _picklable(error)))
             return
-        kept[frame] = images
-        kept.pop(frame - KEPT_FOR_JOBS, None)
+        if job is not None:
+            kept[frame] = images
+            kept.pop(frame - KEPT_FOR_JOBS, None)
         while not free:
             if not handle(connection.recv()):
                 return
@@ -379,6 +380,9 @@ class ImageProcess:
 
     def finish_jobs(self) -> dict[int, object]:
         """Wait for every job submitted; their results not yet taken, by frame."""
+        for message in self._waiting:  # a failed job's error, read ahead by child_is_ahead
+            if message[0] == "error":
+                raise message[2]
         while self._outstanding > 0:
             self._next_message("the results of its last jobs", results_only=True)
         return self.results()
