@@ -41,13 +41,9 @@ from collections.abc import Callable
 from typing import Protocol, runtime_checkable
 
 import cv2
-import numpy as np
 
 from ibik_pin.exceptions import IbikError
-from ibik_pin.tasks import View
-from ibik_pin.tasks.silhouette_axis import AxisView
-from ibik_pin.vision.support import SupportImage
-from ibik_pin.vision.support_parts import WindowedParts, support_from_parts, windowed_parts
+from ibik_pin.tracking.frame_slots import FrameSlots, pack_frame, slot_bytes_for, unpack_frame
 
 __all__ = ["FrameRecords", "ImageProcess", "can_fork"]
 
@@ -55,7 +51,6 @@ __all__ = ["FrameRecords", "ImageProcess", "can_fork"]
 # are read in place), the child prepares the next frames in the others.
 SLOTS = 4
 HELD = 2
-ALIGNMENT = 64  # bytes; each array starts on a cache line
 _STOP_WAIT_S = 5.0
 # Frames whose images the child keeps for jobs. A job comes for the frame the parent has just
 # solved, t: the parent then holds the slots of t - 1 and t, so the child has sent t + 2 at most and
@@ -88,96 +83,7 @@ class FrameRecords(Protocol):
         ...
 
 
-class _Slots:
-    """Writes and reads arrays at offsets of one slot of the shared mapping."""
-
-    def __init__(self, memory: mmap.mmap, slot_bytes: int) -> None:
-        self.memory, self.slot_bytes = memory, slot_bytes
-
-    def write(self, slot: int, arrays: list[np.ndarray]) -> list:
-        """Each array's place: (offset, shape, dtype) in the slot, or the array itself if the slot is full."""
-        places: list = []
-        offset = 0
-        base = slot * self.slot_bytes
-        for array in arrays:
-            array = np.ascontiguousarray(array)
-            if offset + array.nbytes > self.slot_bytes:
-                places.append(array)
-                continue
-            target = np.frombuffer(self.memory, np.uint8, array.nbytes, base + offset)
-            target[:] = array.reshape(-1).view(np.uint8)
-            places.append((offset, array.shape, array.dtype.str))
-            offset += -(-array.nbytes // ALIGNMENT) * ALIGNMENT
-        return places
-
-    def read(self, slot: int, places: list) -> list[np.ndarray]:
-        """The arrays `write` placed, read-only views of the slot (valid until it is handed back)."""
-        arrays = []
-        for place in places:
-            if isinstance(place, np.ndarray):
-                arrays.append(place)
-                continue
-            offset, shape, dtype = place
-            count = int(np.prod(shape, dtype=np.int64))
-            array = np.frombuffer(self.memory, np.dtype(dtype), count, slot * self.slot_bytes + offset).reshape(shape)
-            array.setflags(write=False)
-            arrays.append(array)
-        return arrays
-
-
-def _pack(images) -> tuple[tuple, list[np.ndarray]]:
-    """FrameImages as (a picklable description, its arrays)."""
-    arrays: list[np.ndarray] = []
-
-    def add(array: np.ndarray) -> int:
-        arrays.append(array)
-        return len(arrays) - 1
-
-    views: list[tuple] = []
-    for view in images.views:
-        parts = windowed_parts(view.support)
-        if parts is not None:  # the arrays by their index in `arrays`
-            views.append(("window", add(parts.values), parts.row, parts.column, parts.size, add(parts.mask_bits),
-                          add(parts.inside_values), parts.inside_box, parts.silhouette_box,
-                          parts.inside_cap_px, parts.outside_cap_px, parts.smooth_sigma_px))
-        else:
-            views.append(("values", add(view.support.values), view.support.enabled))
-    axes = None if images.axis_views is None else [(add(axis.pixels), axis.robust_scale_px)
-                                                  for axis in images.axis_views]
-    return (views, axes, list(images.disabled)), arrays
-
-
-def _unpack(description: tuple, arrays: list[np.ndarray], cameras: list):
-    from ibik_pin.tracking.frame_images import FrameImages  # frame_images imports this module
-
-    views_packed, axes, disabled = description
-    views = []
-    for camera, (kind, values, *fields) in zip(cameras, views_packed, strict=True):
-        if kind == "window":
-            row, column, size, bits, inside, inside_box, silhouette_box, inside_cap, outside_cap, sigma = fields
-            support = support_from_parts(WindowedParts(arrays[values], row, column, size, arrays[bits], arrays[inside],
-                                                       inside_box, silhouette_box, inside_cap, outside_cap, sigma))
-        else:
-            support = SupportImage(arrays[values], enabled=fields[0])
-        views.append(View(camera, support))
-    axis_views = None if axes is None else [AxisView(camera, arrays[index], scale)
-                                            for camera, (index, scale) in zip(cameras, axes, strict=True)]
-    return FrameImages(views, disabled, axis_views)
-
-
-def _slot_bytes(first) -> int:
-    """Room for a frame's arrays: every view's support and inside distance over the whole frame,
-    its silhouette's bits, and four times the first frame's medial axes."""
-    room = 0
-    for view in first.views:
-        width, height = view.support.size
-        room += 8 * width * height + width * height // 8 + 3 * ALIGNMENT
-    if first.axis_views is not None:
-        room += sum(4 * axis.pixels.nbytes + 4096 for axis in first.axis_views)
-    return max(room, ALIGNMENT)
-
-
-def _child(prepare: Callable, frame_count: int, connection, slots: _Slots, records: FrameRecords | None,
+def _child(prepare: Callable, frame_count: int, connection, slots: FrameSlots, records: FrameRecords | None,
            job: Callable | None, first) -> None:
     """The child's loop: frames 1 .. frame_count - 1, each into a free slot, and the jobs the parent
     sends, until the parent closes its end; an error is sent at its frame and ends the loop."""
@@ -220,7 +126,7 @@ def _child(prepare: Callable, frame_count: int, connection, slots: _Slots, recor
             if not handle(connection.recv()):
                 return
         slot = free.pop()
-        description, arrays = _pack(images)
+        description, arrays = pack_frame(images)
         news = None
         if records is not None and records.recorded_frames() > sent:
             stop = records.recorded_frames()
@@ -271,7 +177,7 @@ class ImageProcess:
         self._process: multiprocessing.process.BaseProcess | None = None
         self._connection: multiprocessing.connection.Connection | None = None
         self._memory: mmap.mmap | None = None
-        self._slots: _Slots | None = None
+        self._slots: FrameSlots | None = None
 
     def get(self, frame: int):
         if frame != self._next:
@@ -286,9 +192,9 @@ class ImageProcess:
         return self._receive(frame)
 
     def _start(self, first) -> None:
-        slot_bytes = _slot_bytes(first)
+        slot_bytes = slot_bytes_for(first)
         self._memory = mmap.mmap(-1, SLOTS * slot_bytes)  # anonymous and shared: the child writes into it
-        self._slots = _Slots(self._memory, slot_bytes)
+        self._slots = FrameSlots(self._memory, slot_bytes)
         context = multiprocessing.get_context("fork")
         self._connection, child_end = context.Pipe(duplex=True)
         for stream in (sys.stdout, sys.stderr):  # nothing buffered to be written twice by the child
@@ -343,7 +249,7 @@ class ImageProcess:
         arrays = self._slots.read(slot, places)
         if news is not None and self._records is not None:
             self._records.add_records(*news)
-        return _unpack(description, arrays, self._cameras)
+        return unpack_frame(description, arrays, self._cameras)
 
     def child_is_ahead(self) -> bool:
         """Whether the child has prepared as many frames ahead as its slots allow (it then waits for
