@@ -239,19 +239,13 @@ class Tracker:
         outcomes_job = functools.partial(self._outcomes_in_copy, plan, names, targets, report_index, configuration)
         with FrameImagesAhead(prepare, frame_count, self.settings.read_ahead, records, outcomes_job) as images:
             for frame in range(frame_count):
-                present = np.all(np.isfinite(targets[frame]), axis=1)
-                for k, name in enumerate(names):
-                    self.tasks.target_tasks[name].set_target(targets[frame, k] if present[k] else None)
+                present = self._set_targets(names, targets[frame])
                 result.dropped_targets.append([n for n, p in zip(names, present, strict=True) if not p])
                 disabled: list[str] = []
                 if source is not None:  # the image is used
                     prepared = images.get(frame)
                     disabled = prepared.disabled
-                    with warnings.catch_warnings():  # empty views are reported per frame instead
-                        warnings.simplefilter("ignore", EmptySilhouetteWarning)
-                        self.image_task.set_views(prepared.views)
-                        if prepared.axis_views is not None:
-                            self.axis_task.set_views(prepared.axis_views)
+                    self._set_images(prepared)
                 result.disabled_views.append(disabled)
                 self.tasks.start_frame(configuration)
                 frame_start = configuration.q.copy()
@@ -308,19 +302,29 @@ class Tracker:
         frame_start, solution, statuses = payload
         if images is None:
             raise RuntimeError(f"the images of frame {frame} are no longer kept for its level outcomes")
-        present = np.all(np.isfinite(targets[frame]), axis=1)
-        for k, name in enumerate(names):
-            self.tasks.target_tasks[name].set_target(targets[frame, k] if present[k] else None)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", EmptySilhouetteWarning)
-            self.image_task.set_views(images.views)
-            if images.axis_views is not None:
-                self.axis_task.set_views(images.axis_views)
+        self._set_targets(names, targets[frame])
+        self._set_images(images)
         configuration.update(frame_start)
         self.tasks.start_frame(configuration)
         configuration.update(solution)
         return [dataclasses.astuple(outcome)
                 for outcome in level_outcomes(plan, configuration, statuses, report_index, self.solver.damping)]
+
+    def _set_targets(self, names: list[str], frame_targets: np.ndarray) -> np.ndarray:
+        """Give each target task its position of the frame (K, 3), or switch it off where absent (NaN);
+        returns which are present (K,)."""
+        present = np.all(np.isfinite(frame_targets), axis=1)
+        for k, name in enumerate(names):
+            self.tasks.target_tasks[name].set_target(frame_targets[k] if present[k] else None)
+        return present
+
+    def _set_images(self, images: FrameImages) -> None:
+        """Give the image terms the frame's views (empty ones are reported per frame, not warned of)."""
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", EmptySilhouetteWarning)
+            self.image_task.set_views(images.views)
+            if images.axis_views is not None:
+                self.axis_task.set_views(images.axis_views)
 
     def _overlap_per_view(self, configuration: Configuration, disabled: list[str]) -> tuple[np.ndarray, np.ndarray]:
         """Per view, the mean support at the skeleton's sample points [px] and the fraction inside [0-1]."""

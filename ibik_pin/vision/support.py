@@ -261,8 +261,7 @@ def support_from_mask(
         return SupportImage(np.full(mask.shape, inside_value, np.float32))
     if inside is None:
         inside = inside_distance(mask, scanned.box)
-    support_values = functools.partial(_support_values, mask, inside=inside, inside_cap_px=inside_cap_px,
-                                       outside_cap_px=outside_cap_px, smooth_sigma_px=smooth_sigma_px)
+    recipe = _Recipe(mask, inside, inside_cap_px, outside_cap_px, smooth_sigma_px)
     box = inside.silhouette_box
     if also_around is not None:
         rows, columns = also_around
@@ -271,18 +270,18 @@ def support_from_mask(
                    slice(min(box[1].start, columns.start), max(box[1].stop, columns.stop)))
     window = _window_around(box, mask.shape, smooth_sigma_px)
     if window is None:
-        return SupportImage(support_values(None))
+        return SupportImage(recipe.values(None))
     region, valid = window
-    values = np.ascontiguousarray(support_values(region)[shifted(valid, region)])  # read by flat indices
+    values = np.ascontiguousarray(recipe.values(region)[shifted(valid, region)])  # read by flat indices
     support = SupportImage._windowed(_Window(values, valid[0].start, valid[1].start), (mask.shape[1], mask.shape[0]),
-                                     functools.partial(support_values, None))
-    support._recipe = _Recipe(mask, inside, inside_cap_px, outside_cap_px, smooth_sigma_px)
+                                     functools.partial(recipe.values, None))
+    support._recipe = recipe
     return support
 
 
 class _Recipe(NamedTuple):
-    """What support_from_mask was given: enough to compute a windowed support's whole frame again
-    (vision.support_parts)."""
+    """What support_from_mask was given: what computes a windowed support's whole frame, here or
+    again in another process (vision.support_parts)."""
 
     mask: np.ndarray
     inside: InsideDistance
@@ -290,14 +289,12 @@ class _Recipe(NamedTuple):
     outside_cap_px: float | None
     smooth_sigma_px: float
 
-
-def _support_values(mask: np.ndarray, region: tuple[slice, slice] | None, inside: InsideDistance,
-                    inside_cap_px: float | None, outside_cap_px: float | None, smooth_sigma_px: float) -> np.ndarray:
-    """support_from_mask's values on a region holding the silhouette's box (None: the whole frame), (h, w)."""
-    values = signed_distance(mask, region, inside=inside, inside_cap_px=inside_cap_px)
-    if outside_cap_px is not None:
-        np.maximum(values, -outside_cap_px, out=values)
-    return _smooth(values, smooth_sigma_px)
+    def values(self, region: tuple[slice, slice] | None) -> np.ndarray:
+        """The support's values on a region holding the silhouette's box (None: the whole frame), (h, w)."""
+        values = signed_distance(self.mask, region, inside=self.inside, inside_cap_px=self.inside_cap_px)
+        if self.outside_cap_px is not None:
+            np.maximum(values, -self.outside_cap_px, out=values)
+        return _smooth(values, self.smooth_sigma_px)
 
 
 # Where a support is computed: the silhouette's box grown by this margin [px]. Samples of a tracked

@@ -17,7 +17,7 @@ import numpy as np
 
 from ibik_pin.exceptions import InputError
 from ibik_pin.vision.distance import InsideDistance
-from ibik_pin.vision.support import SupportImage, _support_values, _Window
+from ibik_pin.vision.support import SupportImage, _Recipe, _Window
 
 __all__ = ["WindowedParts", "support_from_parts", "windowed_parts"]
 
@@ -78,4 +78,4 @@ def _whole_frame_of_parts(parts: WindowedParts) -> np.ndarray:
     width, height = parts.size
     mask = np.unpackbits(parts.mask_bits, count=width * height).reshape(height, width).view(bool)
     inside = InsideDistance(parts.inside_values, _slices(parts.inside_box), _slices(parts.silhouette_box))
-    return _support_values(mask, None, inside, parts.inside_cap_px, parts.outside_cap_px, parts.smooth_sigma_px)
+    return _Recipe(mask, inside, parts.inside_cap_px, parts.outside_cap_px, parts.smooth_sigma_px).values(None)
