@@ -299,30 +299,52 @@ def within_bounds(values, lower, upper):
 
 @njit(cache=True, nogil=True)
 def active_set_method(hessian, linear, constraint, lower, upper, feasibility):
-    """The method on contiguous float64 arrays; returns (w, ended)."""
+    """The method on contiguous float64 arrays; returns (w, ended).
+
+    Each iteration's KKT system [H C_A^T; C_A 0] [p; y] = [-(H w + g); 0] is solved through H's
+    Cholesky factor, computed once, and the Schur complement S = C_A H^-1 C_A^T of the held rows:
+    with u = H^-1 (H w + g) = w + H^-1 g, y = -S^-1 C_A u and p = -(u + H^-1 C_A^T y). H^-1 g is
+    solved once, and H^-1 c once per row when it is held. A full KKT solve per iteration cost 8 us
+    of LAPACK for 44 variables; at a frame's first targets-only steps on real boxing the method runs
+    at every level, and took 91 of such a step's 141 us.
+    """
     n, rows = hessian.shape[0], constraint.shape[0]
     w = np.zeros(n)
+    triangle, ok = cholesky(hessian)
+    if not ok:  # H is positive definite by construction; NaN or a broken level: proxsuite's turn
+        return w, False
     held = np.empty(rows, dtype=np.int64)
     held_upper = np.empty(rows, dtype=np.bool_)  # which side of each held bound
+    held_solved = np.empty((rows, n))  # H^-1 c for each held row c, in the order held
+    unconstrained = cholesky_solve(triangle, linear)  # H^-1 g: H^-1 (H w + g) = w + H^-1 g
     m = 0
     for _ in range(2 * (n + rows)):
-        kkt = np.zeros((n + m, n + m))
-        kkt[:n, :n] = hessian
-        for j in range(m):
-            kkt[:n, n + j] = constraint[held[j]]
-            kkt[n + j, :n] = constraint[held[j]]
-        right = np.zeros(n + m)
-        right[:n] = -(hessian @ w + linear)
-        try:
-            solution = np.linalg.solve(kkt, right)
-        except Exception:  # singular KKT system: proxsuite takes the level
-            return w, False
-        step = solution[:n]
-        if np.sqrt(step @ step) <= 1e-12 * (1.0 + np.sqrt(w @ w)):
+        free_step = w + unconstrained
+        multipliers = np.zeros(m)
+        if m:
+            schur = np.empty((m, m))
+            right = np.empty(m)
+            for a in range(m):
+                row = constraint[held[a]]
+                right[a] = -(row @ free_step)
+                for b in range(m):
+                    schur[a, b] = row @ held_solved[b]
+            schur_triangle, ok = cholesky(schur)
+            if not ok:  # held rows dependent (the feasibility margin prevents it): proxsuite's turn
+                return w, False
+            multipliers = cholesky_solve(schur_triangle, right)
+        step = -free_step
+        if m == n:  # the held rows fix w
+            step[:] = 0.0
+        for a in range(m if m < n else 0):
+            step -= multipliers[a] * held_solved[a]
+        # The step is a difference of u and H^-1 C_A^T y: where it should vanish, what remains is
+        # their rounding (a few 1e-12 on seeded levels of 12 variables, with |u| near 0.5).
+        if np.sqrt(step @ step) <= 1e-12 * (1.0 + np.sqrt(w @ w)) + 1e-10 * np.sqrt(free_step @ free_step):
             # Multiplier sign: positive pushes against an upper bound, negative against a lower one.
             release, worst = -1, 1e-10
             for j in range(m):
-                wrong_sign = -solution[n + j] if held_upper[j] else solution[n + j]
+                wrong_sign = -multipliers[j] if held_upper[j] else multipliers[j]
                 if wrong_sign > worst:
                     release, worst = j, wrong_sign
             if release < 0:
@@ -330,6 +352,7 @@ def active_set_method(hessian, linear, constraint, lower, upper, feasibility):
             for j in range(release, m - 1):
                 held[j] = held[j + 1]
                 held_upper[j] = held_upper[j + 1]
+                held_solved[j] = held_solved[j + 1]
             m -= 1
             continue
         values = constraint @ w
@@ -358,6 +381,7 @@ def active_set_method(hessian, linear, constraint, lower, upper, feasibility):
         w = w + max(smallest, 0.0) * step
         held[m] = blocking
         held_upper[m] = moves[blocking] > 0.0
+        held_solved[m] = cholesky_solve(triangle, constraint[blocking])
         m += 1
     return w, False
 
