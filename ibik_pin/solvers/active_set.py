@@ -1,10 +1,10 @@
 """The primal active-set method of a bounded QP level, compiled (Numba).
 
 Real motion touches the joint limits on most frames, so the hierarchical QP solves a bounded level
-at about every other step. Each iteration of the method is a small KKT solve (through the Schur complement of the held
-bounds, H factored once) and a few products;
-in numpy every one of them paid a wrapper's microseconds (np.linalg.solve alone 29 us), and the
-method took 190 us a call on real boxing. Compiled, the same arithmetic runs in one call.
+at about every other step. Each iteration of the method is a small KKT solve (through the Schur
+complement of the held bounds, H factored once) and a few products; in numpy every one of them paid
+a wrapper's microseconds (np.linalg.solve alone 29 us), and the method took 190 us a call on real
+boxing. Compiled, the same arithmetic runs in one call.
 The compiled method is :func:`ibik_pin.solvers.kernels.active_set_method` (with `within_bounds`, the
 test of whether a level needs it); the level loop calls it there.
 """
