@@ -25,6 +25,21 @@ def test_the_swivel_circle_keeps_both_distances_and_starts_at_the_joint(rng):
     assert np.ptp(circle, axis=0).max() > 0.1  # the points really go round
 
 
+def test_the_circles_of_several_limbs_are_each_limbs_circle(rng):
+    """Limbs stacked (L, 3) give each limb's circle, a straight or collapsed limb its joint alone."""
+    roots, middles, ends = rng.normal(size=(3, 4, 3))
+    middles[2] = 0.3 * roots[2] + 0.7 * ends[2]  # on the line between its ends: no circle
+    ends[3] = roots[3]  # ends that coincide: no axis
+    circles = swivel_circle(roots, middles, ends, 12)
+    assert circles.shape == (4, 12, 3)
+    for limb in range(2):
+        np.testing.assert_allclose(circles[limb], swivel_circle(roots[limb], middles[limb], ends[limb], 12),
+                                   rtol=0, atol=1e-14)
+        assert np.ptp(circles[limb], axis=0).max() > 0.1
+    for limb in (2, 3):
+        np.testing.assert_array_equal(circles[limb], np.repeat(middles[limb][None], 12, axis=0))
+
+
 def _views(human, q):
     configuration = Configuration(human.model, q)
     ends = configuration.frame_positions(human.segment_frame_ids.reshape(-1)).reshape(-1, 2, 3)

@@ -10,6 +10,7 @@ import numpy as np
 import pinocchio as pin
 from numba import njit
 
+from ibik_pin.checks import all_finite
 from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError
 from ibik_pin.model import frame_id
@@ -73,7 +74,7 @@ class FramePositionTask(Task):
             raise InputError(
                 f"target of frame {self.frame_name!r} must have shape (3,), got {target.shape}"
             )
-        if not np.all(np.isfinite(target)):
+        if not all_finite(target):  # compiled: a frame sets every target, each call counts
             raise InputError(
                 f"target of frame {self.frame_name!r} must be finite, got {target.tolist()}"
             )

@@ -40,6 +40,7 @@ from ibik_pin.vision.kernels import (
     MIN_DEPTH,
     axis_value_and_frame_gradient,
     candidate_axis_values,
+    moved_axis_values,
     nearest_of_rows,
     segment_squared_distances,
 )
@@ -155,26 +156,25 @@ class SilhouetteAxisTask(SegmentCriterion):
 
     def values_at_moves(self, positions: np.ndarray, pose: object | None,
                         moves: Sequence[tuple[np.ndarray, np.ndarray]]) -> list[np.ndarray]:
-        """values_at for each move (SegmentCriterion.values_at_moves), every move's points projected
-        in one call: the same values, to the bit."""
+        """values_at for each move (SegmentCriterion.values_at_moves), every move's candidates
+        projected in one call and read in one compiled call per view: the same values, to the bit."""
         if pose is None or not moves:
             return super().values_at_moves(positions, pose, moves)
         known = cast(list, pose)
-        moving = []  # each move's rows, candidate by candidate (values_at's frame_positions[:, moved])
-        for rows, placed in moves:
-            points = np.repeat(positions[rows][None], len(placed), axis=0)
-            points[:, 0] = placed
-            moving.append(points.reshape(-1, 3))
-        projected = self._pixels(np.concatenate(moving))
-        shared = [at_pose[:2] for at_pose in known]
-        values, start = [], 0
-        for (rows, placed), points in zip(moves, moving, strict=True):
-            stop = start + len(points)
-            view_moving = [(pixels[start:stop], depth[start:stop]) for pixels, depth in projected]
-            values.append(self._placed_values(_place_candidates(shared, view_moving, len(placed), rows),
-                                              len(placed), rows, known))
-            start = stop
-        return values
+        placed = np.concatenate([np.asarray(points, dtype=float).reshape(-1, 3) for _, points in moves])
+        bounds = np.cumsum([0] + [len(points) for _, points in moves]).astype(np.int64)
+        placed_rows = np.array([rows[0] for rows, _ in moves], dtype=np.int64)
+        changing = np.array([self._changing_mask(rows) for rows, _ in moves])
+        values, counts = np.zeros(len(placed)), np.zeros(len(placed))
+        view_values, visible = np.empty(len(placed)), np.empty(len(placed), dtype=bool)
+        for view, (pose_pixels, pose_in_front, distances), (pixels, depth) in zip(
+                self._active_views, known, self._pixels(placed), strict=True):
+            moved_axis_values(view.pixels, distances, pose_pixels, pose_in_front, placed_rows, changing, bounds,
+                              pixels, depth, self._start_index, self._end_index, view.robust_scale_px,
+                              view_values, visible)
+            values += np.where(visible, view_values, 0.0)
+            counts += visible
+        return np.split(values / np.maximum(counts, 1), bounds[1:-1])
 
     def _placed_values(self, placed: list[tuple[np.ndarray, np.ndarray]], candidates: int,
                        moved: np.ndarray | None, known: list | None) -> np.ndarray:
@@ -210,6 +210,12 @@ class SilhouetteAxisTask(SegmentCriterion):
                 changing = ((self._start_index[:, None] == moved) | (self._end_index[:, None] == moved)).any(axis=1)
             kept = self._changing[key] = (np.flatnonzero(changing), np.flatnonzero(~changing))
         return kept
+
+    def _changing_mask(self, moved: np.ndarray) -> np.ndarray:
+        """(S,) bool: the segments that a `moved` row ends (_changing_segments as a mask)."""
+        mask = np.zeros(len(self.segments), dtype=bool)
+        mask[self._changing_segments(moved)[0]] = True
+        return mask
 
     def compute_value(self, configuration: Configuration) -> float:
         return self._evaluate(configuration)[0]

@@ -62,36 +62,42 @@ def swivel_circle(root: np.ndarray, middle: np.ndarray, end: np.ndarray, count: 
     """Positions of the middle joint swivelled about the root-end line, distances to both kept.
 
     Args:
-        root, middle, end: (3,) positions [m]; count: number of samples.
+        root, middle, end: (3,) positions [m], or (L, 3) for L limbs at once; count: number of samples.
 
     Returns:
-        (count, 3) positions [m]; the first is `middle` itself (swivel 0).
+        (count, 3) positions [m], or (L, count, 3); the first is `middle` itself (swivel 0). A limb
+        whose ends coincide, or whose middle joint lies on their line, keeps `middle` everywhere.
     """
+    root, middle, end = (np.asarray(point, dtype=float) for point in (root, middle, end))
+    single = root.ndim == 1
+    root, middle, end = (np.atleast_2d(point) for point in (root, middle, end))
     axis = end - root
-    length = np.linalg.norm(axis)
-    if length < 1e-9:
-        return np.repeat(middle[None], count, axis=0)
-    axis = axis / length
-    centre = root + ((middle - root) @ axis) * axis
+    length = np.sqrt(np.einsum("li,li->l", axis, axis))
+    axis = axis / np.maximum(length, 1e-9)[:, None]
+    centre = root + np.einsum("li,li->l", middle - root, axis)[:, None] * axis
     radial = middle - centre
-    radius = np.linalg.norm(radial)
-    if radius < 1e-9:
-        return np.repeat(middle[None], count, axis=0)
-    first = radial / radius
-    second = np.array([axis[1] * first[2] - axis[2] * first[1], axis[2] * first[0] - axis[0] * first[2],
-                       axis[0] * first[1] - axis[1] * first[0]])  # axis x first (np.cross costs ten times this)
+    radius = np.sqrt(np.einsum("li,li->l", radial, radial))
+    first = radial / np.maximum(radius, 1e-9)[:, None]
+    second = np.stack([axis[:, 1] * first[:, 2] - axis[:, 2] * first[:, 1],  # axis x first
+                       axis[:, 2] * first[:, 0] - axis[:, 0] * first[:, 2],
+                       axis[:, 0] * first[:, 1] - axis[:, 1] * first[:, 0]], axis=1)
     angles = 2.0 * np.pi * np.arange(count) / count
-    return centre + radius * (np.cos(angles)[:, None] * first + np.sin(angles)[:, None] * second)
+    circles = centre[:, None] + radius[:, None, None] * (np.cos(angles)[None, :, None] * first[:, None]
+                                                        + np.sin(angles)[None, :, None] * second[:, None])
+    degenerate = (length < 1e-9) | (radius < 1e-9)
+    circles[degenerate] = middle[degenerate][:, None]
+    return circles[0] if single else circles
 
 
-def _distance_to_line(point: np.ndarray, start: np.ndarray, end: np.ndarray) -> float:
-    """Distance [m] of a point to the line through start and end (to start if they coincide)."""
-    axis = end - start
-    length = np.linalg.norm(axis)
-    offset = point - start
-    if length < 1e-9:
-        return float(np.linalg.norm(offset))
-    return float(np.linalg.norm(offset - (offset @ axis) / length**2 * axis))
+def _distances_to_lines(points: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """Distances [m] of points (L, 3) to the lines through starts and ends (L, 3) (to the start
+    where the two coincide), shape (L,)."""
+    axis = ends - starts
+    offset = points - starts
+    squared_length = np.einsum("li,li->l", axis, axis)
+    along = np.einsum("li,li->l", offset, axis) / np.maximum(squared_length, 1e-18)
+    across = offset - np.where(squared_length >= 1e-18, along, 0.0)[:, None] * axis
+    return np.sqrt(np.einsum("li,li->l", across, across))
 
 
 @dataclass
@@ -148,48 +154,47 @@ class SwivelSearch:
 
     def hints(self, configuration: Configuration, free: Sequence[str]) -> dict[str, np.ndarray]:
         """Better positions [m] of the free middle joints (those among LIMB_ENDS), by name."""
-        hints: dict[str, np.ndarray] = {}
         limbs = [name for name in free if name in LIMB_ENDS and name in self.body.keypoints]
-        limb_ids = [self._limb_frame_ids(name) for name in limbs]
-        # Every limb's two ends read in the silhouettes at once (a projection per view, not per limb).
-        ends_inside = np.ones((len(limbs), 2), dtype=bool)
-        if self.inside_silhouettes is not None and limbs:
-            ends = np.array([configuration.frame_positions(ids[[0, 2]]) for ids in limb_ids]).reshape(-1, 3)
-            ends_inside = self.inside_silhouettes(ends).reshape(-1, 2)
-        # The limbs to search, each with its candidates (its middle joint moved alone).
-        searched = []
-        for name, ids, inside in zip(limbs, limb_ids, ends_inside, strict=True):
-            root, middle, end = configuration.frame_positions(ids)
-            if not inside.all():
-                continue
-            if _distance_to_line(middle, root, end) < self.min_radius:
-                continue
-            searched.append((name, ids, middle, swivel_circle(root, middle, end, int(self.samples))))
+        if not limbs:
+            return {}
+        limb_ids = np.array([self._limb_frame_ids(name) for name in limbs])  # (L, 3)
+        # Every limb's root, middle joint and end in one read, and its two ends read in the
+        # silhouettes at once (a projection per view, not per limb).
+        roots, middles, ends = configuration.frame_positions(limb_ids.reshape(-1)).reshape(-1, 3, 3).transpose(1, 0, 2)
+        searched = _distances_to_lines(middles, roots, ends) >= self.min_radius
+        if self.inside_silhouettes is not None:
+            limb_ends = np.stack([roots, ends], axis=1).reshape(-1, 3)
+            searched &= self.inside_silhouettes(limb_ends).reshape(-1, 2).all(axis=1)
+        chosen = np.flatnonzero(searched)
+        if chosen.size == 0:
+            return {}
+        circles = swivel_circle(roots[chosen], middles[chosen], ends[chosen], int(self.samples))  # (L', C, 3)
         # Each term at the frame's pose once, and every limb's candidates in one call per term.
-        term_values: list[list[np.ndarray]] = [[] for _ in searched]  # per limb, each term's weighted values
-        for task, weight in self.terms:
-            if weight == 0.0 or not getattr(task, "enabled", True) or not searched:
+        weighted = np.zeros((len(self.terms), chosen.size, circles.shape[1]))  # per term, limb, candidate
+        present = np.zeros((len(self.terms), chosen.size), dtype=bool)
+        for index, (task, weight) in enumerate(self.terms):
+            if weight == 0.0 or not getattr(task, "enabled", True):
                 continue
             moves, movers = [], []
-            for index, (_, ids, _, candidates) in enumerate(searched):
-                rows = np.flatnonzero(task.frame_ids == ids[1])
+            for limb, middle_id in enumerate(limb_ids[chosen, 1]):
+                rows = np.flatnonzero(task.frame_ids == middle_id)
                 if rows.size:
-                    moves.append((rows, candidates))
-                    movers.append(index)
+                    moves.append((rows, circles[limb]))
+                    movers.append(limb)
             if not moves:
                 continue
             current = configuration.frame_positions(task.frame_ids)
-            for index, values in zip(movers, task.values_at_moves(current, task.at_pose(current), moves), strict=True):
-                term_values[index].append(weight * values)
-        for (name, _, middle, candidates), terms in zip(searched, term_values, strict=True):
-            if not terms:
-                continue
-            values = np.sum(terms, axis=0)
-            best = int(np.argmax(values))
-            spread = values.max() - values.min()
-            # Every term must agree (none worse at the hint than where the joint is): see the class.
-            agreed = all(term[best] >= term[0] for term in terms)
-            if (agreed and spread > 0.0 and values[best] - values[0] > self.min_gain * spread
-                    and np.linalg.norm(candidates[best] - middle) > self.min_distance):
-                hints[name] = candidates[best]
-        return hints
+            weighted[index, movers] = weight * np.array(task.values_at_moves(current, task.at_pose(current), moves))
+            present[index, movers] = True
+        values = weighted.sum(axis=0)  # absent terms are zeros
+        limbs_read = np.flatnonzero(present.any(axis=0))
+        best = np.argmax(values, axis=1)
+        spread = values.max(axis=1) - values.min(axis=1)
+        at_best = np.take_along_axis(values, best[:, None], axis=1)[:, 0]
+        # Every term must agree (none worse at the hint than where the joint is): see the class.
+        agreed = np.all((np.take_along_axis(weighted, best[None, :, None], axis=2)[..., 0] >= weighted[..., 0])
+                        | ~present, axis=0)
+        moved = np.linalg.norm(circles[np.arange(chosen.size), best] - middles[chosen], axis=1)
+        gained = at_best - values[:, 0] > self.min_gain * spread
+        hinted = agreed & (spread > 0.0) & gained & (moved > self.min_distance)
+        return {limbs[chosen[limb]]: circles[limb, best[limb]] for limb in limbs_read if hinted[limb]}

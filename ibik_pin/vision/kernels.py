@@ -300,6 +300,57 @@ def candidate_axis_values(samples, starts, ends, fixed, scale, values):
 
 
 @njit(cache=True, nogil=True)
+def moved_axis_values(samples, known, pose_pixels, pose_in_front, placed_rows, changing, bounds, placed_pixels,
+                      placed_depth, start_index, end_index, scale, values, visible):
+    """The silhouette-axis term of one view for several moves of a pose, each placing one segment end
+    at candidate points (SilhouetteAxisTask.values_at_moves): per move, the distance to the segments
+    it leaves alone read from the pose's, and candidate_axis_values over those it changes.
+
+    Args:
+        samples: (N, 2) [px]; known: (S, N) each sample's squared distance to each segment at the
+            pose [px^2]; pose_pixels: (K, 2) the pose's segment ends [px]; pose_in_front: (K,) bool.
+        placed_rows: (M,) the row of pose_pixels each move places; changing: (M, S) bool, the
+            segments whose values each move changes; bounds: (M + 1,) where each move's candidates
+            start in placed_pixels (P, 2) [px] and placed_depth (P,) [m].
+        start_index, end_index: (S,) rows of each segment's ends; scale: c [px].
+        values: (P,) written [px]; visible: (P,) written, whether every end is in front of the camera.
+    """
+    segments = start_index.shape[0]
+    fixed = np.empty(samples.shape[0])
+    for m in range(placed_rows.shape[0]):
+        row = placed_rows[m]
+        first, last = bounds[m], bounds[m + 1]
+        count = last - first
+        fixed[:] = np.inf
+        in_front = True
+        for k in range(pose_in_front.shape[0]):
+            if k != row and not pose_in_front[k]:
+                in_front = False
+        changed = 0
+        for k in range(segments):
+            if changing[m, k]:
+                changed += 1
+            else:
+                for i in range(samples.shape[0]):
+                    fixed[i] = min(fixed[i], known[k, i])
+        starts, ends = np.empty((count, changed, 2)), np.empty((count, changed, 2))
+        column = 0
+        for k in range(segments):
+            if not changing[m, k]:
+                continue
+            for c in range(count):
+                for end_row, out in ((start_index[k], starts), (end_index[k], ends)):
+                    if end_row == row:
+                        out[c, column, 0], out[c, column, 1] = placed_pixels[first + c, 0], placed_pixels[first + c, 1]
+                    else:
+                        out[c, column, 0], out[c, column, 1] = pose_pixels[end_row, 0], pose_pixels[end_row, 1]
+            column += 1
+        candidate_axis_values(samples, starts, ends, fixed, scale, values[first:last])
+        for c in range(count):
+            visible[first + c] = in_front and placed_depth[first + c] > MIN_DEPTH
+
+
+@njit(cache=True, nogil=True)
 def axis_value_and_pixel_gradient(samples, end_pixels, start_index, end_index, scale, pixel_gradient):
     """h_axis of one view and its derivative with respect to the projected segment ends.
 
