@@ -180,7 +180,8 @@ def test_views_cross_only_when_two_optical_axes_are_far_from_parallel():
 
 def test_the_search_reading_each_term_at_the_pose_gives_the_values_of_one_computing_it(human, monkeypatch):
     """Every limb's candidates in one values_at_moves call per term, each term read at the pose once:
-    the values values_at gives each limb's candidates computed from scratch, to the bit."""
+    the values values_at gives each limb's candidates computed from scratch (to the bit for the
+    silhouette axis; the overlap's moved samples are the pose's shifted, equal within rounding)."""
     import pinocchio as pin
 
     q = pin.neutral(human.model)
@@ -207,7 +208,11 @@ def test_the_search_reading_each_term_at_the_pose_gives_the_values_of_one_comput
         for (rows, placed), mine in zip(moves, values, strict=True):
             candidates = np.repeat(positions[None], len(placed), axis=0)
             candidates[:, rows[0]] = placed
-            np.testing.assert_array_equal(mine, task.values_at(candidates, moved=rows))  # tolerance 0
+            expected = task.values_at(candidates, moved=rows)
+            if isinstance(task, ImageTask):
+                np.testing.assert_allclose(mine, expected, rtol=1e-13, atol=1e-13)
+            else:
+                np.testing.assert_array_equal(mine, expected)  # tolerance 0
     for task, _ in terms:  # the search again, each limb and term computed from scratch
         monkeypatch.setattr(task, "values_at_moves", type(task).values_at_moves.__get__(task))
         monkeypatch.setattr(task, "at_pose", lambda positions: None)
@@ -215,3 +220,30 @@ def test_the_search_reading_each_term_at_the_pose_gives_the_values_of_one_comput
     assert hints.keys() == plain.keys()
     for name in hints:
         np.testing.assert_array_equal(hints[name], plain[name])
+
+
+def test_both_terms_answer_moves_of_any_size_as_values_at(human, rng):
+    """Moves of different candidate counts, one declaring two rows moved (only its first placed):
+    each term's batched answer is values_at's for the same candidates."""
+    import pinocchio as pin
+
+    q = pin.neutral(human.model)
+    for joint, angle in [("left_shoulder_X", -1.2), ("left_elbow_Z", 1.3), ("right_knee_Z", 0.8)]:
+        q[human.model.joints[human.model.getJointId(joint)].idx_q] = angle
+    image_views, axis_views = _views(human, q)
+    configuration = Configuration(human.model, q)
+    for task in (ImageTask(human, image_views), SilhouetteAxisTask(human, axis_views)):
+        positions = configuration.frame_positions(task.frame_ids)
+        elbow = int(np.flatnonzero(task.frame_ids == human.frame_id("LElbow"))[0])
+        knee = int(np.flatnonzero(task.frame_ids == human.frame_id("RKnee"))[0])
+        wrist = int(np.flatnonzero(task.frame_ids == human.frame_id("LWrist"))[0])
+        moves = [(np.array([elbow]), positions[elbow] + rng.normal(0.0, 0.05, (7, 3))),
+                 (np.array([knee]), positions[knee] + rng.normal(0.0, 0.05, (3, 3))),
+                 (np.array([elbow, wrist]), positions[elbow] + rng.normal(0.0, 0.05, (5, 3)))]
+        answers = task.values_at_moves(positions, task.at_pose(positions), moves)
+        assert [len(values) for values in answers] == [7, 3, 5]
+        for (rows, placed), values in zip(moves, answers, strict=True):
+            candidates = np.repeat(positions[None], len(placed), axis=0)
+            candidates[:, rows[0]] = placed
+            np.testing.assert_allclose(values, task.values_at(candidates, moved=rows), rtol=1e-13, atol=1e-13)
+        assert np.ptp(answers[0]) > 0.0  # the candidates really differ

@@ -26,7 +26,7 @@ from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.tasks.segments import SegmentCriterion, segment_ends
 from ibik_pin.vision.camera import CameraLike, Projection
-from ibik_pin.vision.kernels import support_overlap_at_segments, support_values
+from ibik_pin.vision.kernels import moved_samples, support_overlap_at_segments, support_values
 from ibik_pin.vision.pinhole import pixel_projector, projector
 from ibik_pin.vision.support import SupportImageLike
 
@@ -168,33 +168,32 @@ class ImageTask(SegmentCriterion):
 
     def values_at_moves(self, positions: np.ndarray, pose: object | None,
                         moves: Sequence[tuple[np.ndarray, np.ndarray]]) -> list[np.ndarray]:
-        """values_at for each move (SegmentCriterion.values_at_moves), every move's moving samples
-        read in one pass per view: the same values, to the bit."""
-        if pose is None:
+        """values_at for each move (SegmentCriterion.values_at_moves): every move's changing samples
+        placed in one compiled call (each moves with the placed end, from the pose's samples) and
+        read in one pass per view; values_at's within rounding (1e-15 of a pixel)."""
+        if pose is None or not moves:
             return super().values_at_moves(positions, pose, moves)
         known = cast(list, pose)
         samples = self._interpolation.shape[0]
-        changes, shapes, points = [], [], []
-        for rows, placed in moves:
-            candidates = np.repeat(positions[None], len(placed), axis=0)
-            candidates[:, rows[0]] = placed
-            changing = self._changing_samples(rows)
-            moving = self._samples(self._interpolation[changing], candidates)
-            changes.append(changing)
-            shapes.append(moving.shape[:2])
-            points.append(np.ascontiguousarray(moving).reshape(-1, 3))
-        flat = np.concatenate(points) if points else np.zeros((0, 3))
-        read = [support_at(view, flat, projected=projected)
-                for view, projected in zip(self._active_views, self._pixels(flat), strict=True)]
-        values, start = [], 0
-        for changing, shape in zip(changes, shapes, strict=True):
-            stop = start + shape[0] * shape[1]
-            total = np.zeros(shape[0])
-            for view_values, at_pose in zip(read, known, strict=True):
-                total += view_values[start:stop].reshape(shape).sum(axis=1) + at_pose[:, ~changing].sum()
-            values.append(total / (samples * max(len(self._active_views), 1)))
-            start = stop
-        return values
+        placed = np.concatenate([np.asarray(points, dtype=float).reshape(-1, 3) for _, points in moves])
+        candidates = np.array([len(points) for _, points in moves])
+        bounds = np.concatenate([[0], np.cumsum(candidates)]).astype(np.int64)
+        changing = np.array([self._changing_samples(rows) for rows, _ in moves])  # (V, M)
+        per_candidate = changing.sum(axis=1)  # changing samples of each move's candidates
+        points = np.empty((int(candidates @ per_candidate), 3))
+        positions = np.ascontiguousarray(positions, dtype=float)
+        moved_samples(self._interpolation @ positions, self._interpolation, changing,
+                      np.array([rows[0] for rows, _ in moves], dtype=np.int64), bounds, placed, positions, points)
+        # Each candidate's changing samples are consecutive: summed by one reduceat per view.
+        starts = np.repeat(np.concatenate([[0], np.cumsum(candidates * per_candidate)[:-1]]), candidates) \
+            + np.concatenate([np.arange(count) * size for count, size in zip(candidates, per_candidate, strict=True)])
+        filled = np.repeat(per_candidate, candidates) > 0  # (reduceat reads an empty group as one value)
+        totals = np.zeros(len(placed))
+        for view, at_pose, projected in zip(self._active_views, known, self._pixels(points), strict=True):
+            totals += np.repeat((~changing) @ at_pose[0], candidates)  # each move's unchanged samples
+            if points.size:
+                totals[filled] += np.add.reduceat(support_at(view, points, projected=projected), starts[filled])
+        return np.split(totals / (samples * max(len(self._active_views), 1)), bounds[1:-1])
 
     def _changing_samples(self, moved: np.ndarray) -> np.ndarray:
         """(M,) bool: the samples on a segment that a `moved` row ends (kept per set of rows)."""

@@ -218,6 +218,35 @@ def support_values(pixels, depth, support, row0, column0, width, height, behind,
 
 
 @njit(cache=True, nogil=True)
+def moved_samples(pose_samples, interpolation, changing, placed_rows, bounds, placed, positions, points):
+    """The samples that several moves of a pose change, each move placing one segment end at
+    candidate points (ImageTask.values_at_moves): a changing sample moves with its weight on the
+    placed end times that end's displacement.
+
+    Args:
+        pose_samples: (M, 3) the samples at the pose [m]; interpolation: (M, K) each sample's
+            weights on the segment ends; changing: (V, M) bool, the samples each move changes;
+            placed_rows: (V,) the end each move places; bounds: (V + 1,) where each move's candidates
+            start in placed (P, 3) [m]; positions: (K, 3) the pose's segment ends [m].
+        points: written, move by move and candidate by candidate, the changing samples in order.
+    """
+    out = 0
+    for m in range(placed_rows.shape[0]):
+        row = placed_rows[m]
+        for c in range(bounds[m], bounds[m + 1]):
+            shift_x = placed[c, 0] - positions[row, 0]
+            shift_y = placed[c, 1] - positions[row, 1]
+            shift_z = placed[c, 2] - positions[row, 2]
+            for j in range(pose_samples.shape[0]):
+                if changing[m, j]:
+                    weight = interpolation[j, row]
+                    points[out, 0] = pose_samples[j, 0] + weight * shift_x
+                    points[out, 1] = pose_samples[j, 1] + weight * shift_y
+                    points[out, 2] = pose_samples[j, 2] + weight * shift_z
+                    out += 1
+
+
+@njit(cache=True, nogil=True)
 def segment_squared_distances(samples, starts, ends, distances):
     """Squared distance [px^2] of each sample (N, 2) to each segment from starts (S, 2) to ends
     (S, 2): writes distances (S, N)."""
