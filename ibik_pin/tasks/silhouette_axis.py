@@ -31,6 +31,7 @@ from typing import cast
 
 import numpy as np
 
+from ibik_pin.checks import all_finite
 from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
@@ -66,7 +67,7 @@ class AxisView:
 
     def __post_init__(self) -> None:
         self.pixels = np.asarray(self.pixels, dtype=np.float64).reshape(-1, 2)
-        if not np.isfinite(self.pixels).all():
+        if not all_finite(self.pixels):  # compiled: every frame's views are checked
             raise InputError("pixels: the medial-axis samples must be finite [px]")
         if not (np.isfinite(self.robust_scale_px) and self.robust_scale_px > 0.0):
             raise InputError(f"robust_scale_px: expected a positive distance [px], found {self.robust_scale_px}")

@@ -10,6 +10,7 @@ of the slot (`unpack_frame`), valid until the slot is handed back.
 
 from __future__ import annotations
 
+import math
 import mmap
 
 import numpy as np
@@ -54,8 +55,7 @@ class FrameSlots:
                 arrays.append(place)
                 continue
             offset, shape, dtype = place
-            count = int(np.prod(shape, dtype=np.int64))
-            array = np.frombuffer(self.memory, np.dtype(dtype), count, slot * self.slot_bytes + offset).reshape(shape)
+            array = np.frombuffer(self.memory, dtype, math.prod(shape), slot * self.slot_bytes + offset).reshape(shape)
             array.setflags(write=False)
             arrays.append(array)
         return arrays

@@ -20,6 +20,8 @@ frame's solution, what a user studying priorities asks of each stack level:
 
 from __future__ import annotations
 
+import itertools
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -70,9 +72,12 @@ def _weighted_rows(tasks: Sequence, configuration: Configuration) -> tuple[np.nd
               and not isinstance(task, CriterionStepTask)]
     if not chosen:
         return np.zeros((0, configuration.nv)), np.zeros(0)
-    jacobians = [np.sqrt(task.weight) * task.compute_jacobian(configuration) for task in chosen]
-    errors = [np.sqrt(task.weight) * task.compute_error(configuration) for task in chosen]
-    return np.vstack(jacobians), np.concatenate(errors)
+    # sqrt(w) J is each task's compute_linear_system A: read class by class in one call (the
+    # position targets' rows from one read of every frame's Jacobian, as the solvers read them).
+    jacobians = [kind.stacked_linear_system(list(run), configuration)[0]
+                 for kind, run in itertools.groupby(chosen, key=type)]
+    errors = [math.sqrt(task.weight) * task.compute_error(configuration) for task in chosen]
+    return (jacobians[0] if len(jacobians) == 1 else np.vstack(jacobians)), np.concatenate(errors)
 
 
 def _outcome(tasks: Sequence, configuration: Configuration, null_basis: np.ndarray, status: str,
