@@ -24,6 +24,7 @@ import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -74,7 +75,7 @@ def _weighted_rows(tasks: Sequence, configuration: Configuration) -> tuple[np.nd
         return np.zeros((0, configuration.nv)), np.zeros(0)
     # sqrt(w) J is each task's compute_linear_system A: read class by class in one call (the
     # position targets' rows from one read of every frame's Jacobian, as the solvers read them).
-    jacobians = [kind.stacked_linear_system(list(run), configuration)[0]
+    jacobians = [cast(type[Task], kind).stacked_linear_system(list(run), configuration)[0]
                  for kind, run in itertools.groupby(chosen, key=type)]
     errors = [math.sqrt(task.weight) * task.compute_error(configuration) for task in chosen]
     return (jacobians[0] if len(jacobians) == 1 else np.vstack(jacobians)), np.concatenate(errors)
