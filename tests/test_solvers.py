@@ -642,7 +642,8 @@ def test_stopping_at_the_peak_changes_nothing_without_a_gradient_level(human, so
 
 def test_a_plans_packed_levels_are_refilled_step_to_step_and_rebuilt_when_their_layout_changes(human, rng):
     """StepWorkspace: the next step of the same plan reuses the arrays, holding what a fresh packing
-    holds; another plan, or levels of another shape under the same plan, get a new packing."""
+    holds; levels of another shape get a new packing, and a later plan (the next solve) the arrays
+    kept for its layout, refilled."""
     from ibik_pin.solvers.base import LevelPlan
     from ibik_pin.solvers.level_loop import PackedLevels, StepWorkspace
 
@@ -667,6 +668,11 @@ def test_a_plans_packed_levels_are_refilled_step_to_step_and_rebuilt_when_their_
     assert rebuilt is not first
     assert rebuilt.rows.shape[0] == fresh.rows.shape[0] - (built[0].A.shape[0] - 3)
     assert workspace.packed(shorter, plan, adaptation, human.model.nv) is rebuilt
-    assert workspace.packed(shorter, LevelPlan.of(levels), adaptation, human.model.nv) is not rebuilt
+    assert workspace.packed(shorter, LevelPlan.of(levels), adaptation, human.model.nv) is rebuilt
+    back = workspace.packed(built, LevelPlan.of(levels), adaptation, human.model.nv)
+    assert back is first
+    for name in ("kinds", "rows", "targets", "row_starts", "adaptation", "previous", "steps"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(fresh, name))
+    assert workspace.packed(built, LevelPlan.of(levels), StepAdaptation(), human.model.nv) is not first
     assert workspace.identity(human.model.nv) is workspace.identity(human.model.nv)
     np.testing.assert_array_equal(workspace.identity(5), np.eye(5))

@@ -22,6 +22,13 @@ from ibik_pin.solvers.step_adaptation import StepAdaptation
 __all__ = ["PackedLevels", "StepWorkspace"]
 
 _NO_TARGET = np.zeros(1)  # a gradient level's (unused) target
+_KEPT_LAYOUTS = 16  # layouts kept at most (a stack that keeps changing shape starts afresh)
+
+
+def layout_of(built: list) -> tuple:
+    """Per built level, its kind and row count (Python ints): what PackedLevels' arrays depend on."""
+    return tuple((LEAST_SQUARES, level.A.shape[0]) if isinstance(level, LeastSquaresLevel) else
+                 (GRADIENT, 1) if isinstance(level, GradientLevel) else (EMPTY, 0) for level in built)
 
 
 class PackedLevels:
@@ -36,9 +43,7 @@ class PackedLevels:
     def __init__(self, built: list, source: StepAdaptation, nv: int) -> None:
         self.source = source
         # Per level, its kind and row count, as Python ints: `load` checks the next step's against them.
-        self._layout = tuple(
-            (LEAST_SQUARES, level.A.shape[0]) if isinstance(level, LeastSquaresLevel) else
-            (GRADIENT, 1) if isinstance(level, GradientLevel) else (EMPTY, 0) for level in built)
+        self._layout = layout_of(built)
         self._gradient_levels = [index for index, (kind, _) in enumerate(self._layout) if kind == GRADIENT]
         self.kinds = np.array([kind for kind, _ in self._layout], dtype=np.int64)
         self.row_starts = np.concatenate([[0], np.cumsum([count for _, count in self._layout])]).astype(np.int64)
@@ -105,22 +110,32 @@ class PackedLevels:
 
 
 class StepWorkspace:
-    """What a solver keeps between the steps of one solve: the PackedLevels of the plan being
-    solved (its arrays refilled at each step instead of allocated) and an identity per size."""
+    """What a solver keeps between steps: the PackedLevels of every layout of levels it solved (its
+    arrays refilled at each step instead of allocated; the tracker's frame alternates three
+    solves of different layouts) and an identity per size."""
 
     def __init__(self) -> None:
         self._plan: object = None
         self._packed: PackedLevels | None = None
+        self._by_layout: dict[tuple, PackedLevels] = {}
         self._identities: dict[int, np.ndarray] = {}
 
     def packed(self, built: list, plan: object, source: StepAdaptation, nv: int) -> PackedLevels:
-        """`built` packed: in the arrays of the plan's previous step when it has one and the same
-        layout, else in new ones (kept for the plan's next step; a step without a plan keeps none)."""
+        """`built` packed: in the arrays of the plan's previous step (the next steps of a solve), else
+        in those kept for its layout, else in new ones, kept (a step without a plan keeps none)."""
         packed = self._packed
-        if plan is None or plan is not self._plan or packed is None or packed.source is not source \
-                or packed.previous.shape[1] != nv or not packed.load(built):
+        if plan is not None and plan is self._plan and packed is not None and packed.source is source \
+                and packed.previous.shape[1] == nv and packed.load(built):
+            return packed
+        layout = layout_of(built)
+        packed = self._by_layout.get(layout)
+        if packed is None or packed.source is not source or packed.previous.shape[1] != nv or not packed.load(built):
             packed = PackedLevels(built, source, nv)
-            self._plan, self._packed = (plan, packed) if plan is not None else (None, None)
+            if plan is not None:
+                if len(self._by_layout) >= _KEPT_LAYOUTS:
+                    self._by_layout.clear()
+                self._by_layout[layout] = packed
+        self._plan, self._packed = (plan, packed) if plan is not None else (None, None)
         return packed
 
     def identity(self, nv: int) -> np.ndarray:
