@@ -12,14 +12,9 @@ from ibik_pin.tasks.silhouette_axis import (
     SilhouetteAxisTask,
 )
 from ibik_pin.tasks.weighted_sum import WeightedSum
+from ibik_pin.vision.candidate_kernels import candidate_axis_values, nearest_of_rows, segment_squared_distances
 from ibik_pin.vision.distance import distance_to_background
-from ibik_pin.vision.kernels import (
-    axis_value_and_frame_gradient,
-    axis_value_and_pixel_gradient,
-    candidate_axis_values,
-    nearest_of_rows,
-    segment_squared_distances,
-)
+from ibik_pin.vision.kernels import axis_value_and_frame_gradient, axis_value_and_pixel_gradient
 from ibik_pin.vision.medial_axis import medial_axis_pixels
 from ibik_pin.vision.pinhole import look_at_camera
 from ibik_pin.vision.render import render_capsules

@@ -26,7 +26,8 @@ from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.tasks.segments import SegmentCriterion, segment_ends
 from ibik_pin.vision.camera import CameraLike, Projection
-from ibik_pin.vision.kernels import moved_samples, support_overlap_at_segments, support_values
+from ibik_pin.vision.candidate_kernels import moved_samples
+from ibik_pin.vision.kernels import support_overlap_at_segments, support_values
 from ibik_pin.vision.pinhole import pixel_projector, projector
 from ibik_pin.vision.support import SupportImageLike
 

@@ -37,14 +37,13 @@ from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.tasks.segments import SegmentCriterion, segment_ends
 from ibik_pin.vision.camera import CameraLike
-from ibik_pin.vision.kernels import (
-    MIN_DEPTH,
-    axis_value_and_frame_gradient,
+from ibik_pin.vision.candidate_kernels import (
     candidate_axis_values,
     moved_axis_values,
     nearest_of_rows,
     segment_squared_distances,
 )
+from ibik_pin.vision.kernels import MIN_DEPTH, axis_value_and_frame_gradient
 from ibik_pin.vision.pinhole import pixel_projector, projector
 
 __all__ = ["AxisView", "SilhouetteAxisTask"]
