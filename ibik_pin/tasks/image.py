@@ -171,7 +171,7 @@ class ImageTask(SegmentCriterion):
                         moves: Sequence[tuple[np.ndarray, np.ndarray]]) -> list[np.ndarray]:
         """values_at for each move (SegmentCriterion.values_at_moves): every move's changing samples
         placed in one compiled call (each moves with the placed end, from the pose's samples) and
-        read in one pass per view; values_at's within rounding (1e-15 of a pixel)."""
+        read in one pass per view; values_at's within rounding (tested to 1e-13)."""
         if pose is None or not moves:
             return super().values_at_moves(positions, pose, moves)
         known = cast(list, pose)
@@ -179,7 +179,7 @@ class ImageTask(SegmentCriterion):
         placed = np.concatenate([np.asarray(points, dtype=float).reshape(-1, 3) for _, points in moves])
         candidates = np.array([len(points) for _, points in moves])
         bounds = np.concatenate([[0], np.cumsum(candidates)]).astype(np.int64)
-        changing = np.array([self._changing_samples(rows) for rows, _ in moves])  # (V, M)
+        changing = np.array([self._changing_samples(rows) for rows, _ in moves])  # (moves, M)
         per_candidate = changing.sum(axis=1)  # changing samples of each move's candidates
         points = np.empty((int(candidates @ per_candidate), 3))
         positions = np.ascontiguousarray(positions, dtype=float)

@@ -32,9 +32,10 @@ def moved_samples(pose_samples, interpolation, changing, placed_rows, bounds, pl
 
     Args:
         pose_samples: (M, 3) the samples at the pose [m]; interpolation: (M, K) each sample's
-            weights on the segment ends; changing: (V, M) bool, the samples each move changes;
-            placed_rows: (V,) the end each move places; bounds: (V + 1,) where each move's candidates
-            start in placed (P, 3) [m]; positions: (K, 3) the pose's segment ends [m].
+            weights on the segment ends; changing: (moves, M) bool, the samples each move
+            changes; placed_rows: (moves,) the end each move places; bounds: (moves + 1,) where
+            each move's candidates start in placed (P, 3) [m]; positions: (K, 3) the pose's
+            segment ends [m].
         points: written, move by move and candidate by candidate, the changing samples in order.
     """
     out = 0
