@@ -674,5 +674,13 @@ def test_a_plans_packed_levels_are_refilled_step_to_step_and_rebuilt_when_their_
     for name in ("kinds", "rows", "targets", "row_starts", "adaptation", "previous", "steps"):
         np.testing.assert_array_equal(getattr(back, name), getattr(fresh, name))
     assert workspace.packed(built, LevelPlan.of(levels), StepAdaptation(), human.model.nv) is not first
+    # A stack that keeps changing shape: at most a bounded number of layouts kept, each packing right.
+    assert built[-1].A.shape[0] > 20  # more layouts than are kept
+    for rows in range(1, built[-1].A.shape[0] + 1):
+        varied = list(built)
+        varied[-1] = dataclasses.replace(built[-1], A=built[-1].A[:rows], b=built[-1].b[:rows])
+        packed = workspace.packed(varied, LevelPlan.of(levels), adaptation, human.model.nv)
+        np.testing.assert_array_equal(packed.rows, PackedLevels(varied, adaptation, human.model.nv).rows)
+    assert len(workspace._by_layout) <= 16
     assert workspace.identity(human.model.nv) is workspace.identity(human.model.nv)
     np.testing.assert_array_equal(workspace.identity(5), np.eye(5))
