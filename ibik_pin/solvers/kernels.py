@@ -333,11 +333,12 @@ def active_set_method(hessian, linear, constraint, lower, upper, feasibility):
             if not ok:  # held rows dependent (the feasibility margin prevents it): proxsuite's turn
                 return w, False
             multipliers = cholesky_solve(schur_triangle, right)
-        step = -free_step
         if m == n:  # the held rows fix w
-            step[:] = 0.0
-        for a in range(m if m < n else 0):
-            step -= multipliers[a] * held_solved[a]
+            step = np.zeros(n)
+        else:
+            step = -free_step
+            for a in range(m):
+                step -= multipliers[a] * held_solved[a]
         # The step is a difference of u and H^-1 C_A^T y: where it should vanish, what remains is
         # their rounding (a few 1e-12 on seeded levels of 12 variables, with |u| near 0.5).
         if np.sqrt(step @ step) <= 1e-12 * (1.0 + np.sqrt(w @ w)) + 1e-10 * np.sqrt(free_step @ free_step):

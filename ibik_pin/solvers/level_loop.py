@@ -115,18 +115,12 @@ class StepWorkspace:
     solves of different layouts) and an identity per size."""
 
     def __init__(self) -> None:
-        self._plan: object = None
-        self._packed: PackedLevels | None = None
         self._by_layout: dict[tuple, PackedLevels] = {}
         self._identities: dict[int, np.ndarray] = {}
 
     def packed(self, built: list, plan: object, source: StepAdaptation, nv: int) -> PackedLevels:
-        """`built` packed: in the arrays of the plan's previous step (the next steps of a solve), else
-        in those kept for its layout, else in new ones, kept (a step without a plan keeps none)."""
-        packed = self._packed
-        if plan is not None and plan is self._plan and packed is not None and packed.source is source \
-                and packed.previous.shape[1] == nv and packed.load(built):
-            return packed
+        """`built` packed: in the arrays kept for its layout (the previous step of its solve, or an
+        earlier solve of the same shape), else in new ones, kept (a step without a plan keeps none)."""
         layout = layout_of(built)
         packed = self._by_layout.get(layout)
         if packed is None or packed.source is not source or packed.previous.shape[1] != nv or not packed.load(built):
@@ -135,7 +129,6 @@ class StepWorkspace:
                 if len(self._by_layout) >= _KEPT_LAYOUTS:
                     self._by_layout.clear()
                 self._by_layout[layout] = packed
-        self._plan, self._packed = (plan, packed) if plan is not None else (None, None)
         return packed
 
     def identity(self, nv: int) -> np.ndarray:
