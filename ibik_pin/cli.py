@@ -19,8 +19,10 @@ if __name__ == "__main__" or Path(sys.argv[0]).stem == "ibik":
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse
+import contextlib
 import signal
 import threading
+import types
 import typing
 import warnings
 from typing import TYPE_CHECKING
@@ -30,6 +32,8 @@ from ibik_pin.exceptions import IbikError
 from ibik_pin.solvers import SOLVERS
 
 if TYPE_CHECKING:
+    from collections.abc import Iterator
+
     from ibik_pin.tracking.pipeline import TrackJob
 
 # The subcommands' modules (tracking, I/O, rendering, plots, the demo's synthetic data) are
@@ -215,8 +219,52 @@ class Terminated(BaseException):
     """SIGTERM, raised where the program is so that every cleanup (the staging folder) runs."""
 
 
-def _raise_terminated(signal_number: int, frame: object) -> None:
-    raise Terminated
+# Modules whose ctypes callbacks run Python (Numba's compiler and its cache, through llvmlite): an
+# exception a signal handler raises there is swallowed or turned into a SystemError, and LLVM is left
+# half-way; CI saw a segfault from SIGTERM while a kernel was compiled into a cold cache.
+_UNINTERRUPTIBLE_MODULES = ("numba.", "llvmlite.")
+_RETRY_SECONDS = 0.02
+_pending_signal: list[type[BaseException]] = []  # the signal taken and not yet raised, at most one
+
+
+def _inside_uninterruptible(frame: types.FrameType | None) -> bool:
+    while frame is not None:
+        if str(frame.f_globals.get("__name__", "")).startswith(_UNINTERRUPTIBLE_MODULES):
+            return True
+        frame = frame.f_back
+    return False
+
+
+def _raise_where_safe(signal_number: int, frame: types.FrameType | None) -> None:
+    """SIGTERM as Terminated, SIGINT as KeyboardInterrupt, raised where the program is so that every
+    cleanup (the staging folder) runs; inside Numba's compiler, retried by SIGALRM every 20 ms until
+    the program is out of it."""
+    if signal_number != signal.SIGALRM and not _pending_signal:
+        _pending_signal.append(Terminated if signal_number == signal.SIGTERM else KeyboardInterrupt)
+    if not _pending_signal:
+        return  # an alarm that is not ours to act on
+    if _inside_uninterruptible(frame):
+        signal.setitimer(signal.ITIMER_REAL, _RETRY_SECONDS)
+        return
+    raise _pending_signal.pop()()
+
+
+@contextlib.contextmanager
+def _signals_raised_where_safe() -> Iterator[None]:
+    """Install _raise_where_safe for the run (where the platform has the alarm to retry with), and put
+    back the handlers there were."""
+    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "setitimer"):
+        yield
+        return
+    handled = (signal.SIGTERM, signal.SIGINT, signal.SIGALRM)
+    previous = {number: signal.signal(number, _raise_where_safe) for number in handled}
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        _pending_signal.clear()
+        for number, handler in previous.items():
+            signal.signal(number, handler)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -225,8 +273,11 @@ def main(argv: list[str] | None = None) -> int:
     # numpy's "Mean of empty slice" and the like: the package checks its inputs and reports what a
     # user can act on; numpy's own words about an intermediate array are noise on the one line.
     warnings.filterwarnings("ignore", category=RuntimeWarning)
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGTERM, _raise_terminated)
+    with _signals_raised_where_safe():
+        return _run(arguments)
+
+
+def _run(arguments: argparse.Namespace) -> int:
     try:
         if arguments.command == "track":
             from ibik_pin.tracking.pipeline import run_track
@@ -250,28 +301,10 @@ def main(argv: list[str] | None = None) -> int:
         message = " ".join(str(error).split())  # one line, whatever the message held
         print(f"ibik: error: {message}", file=sys.stderr)
         return 2
-    except (KeyboardInterrupt, Terminated, SystemError) as error:
-        # A signal handled inside a library's callback (Numba loading a cached function) reaches
-        # here as the cause of the SystemError the library raises instead.
-        signalled = _signal_behind(error)
-        if signalled is None:
-            raise
-        print(f"ibik: {'interrupted' if isinstance(signalled, KeyboardInterrupt) else 'terminated'}", file=sys.stderr)
-        return 130 if isinstance(signalled, KeyboardInterrupt) else 143
+    except (KeyboardInterrupt, Terminated) as error:
+        print(f"ibik: {'interrupted' if isinstance(error, KeyboardInterrupt) else 'terminated'}", file=sys.stderr)
+        return 130 if isinstance(error, KeyboardInterrupt) else 143
     return 0
-
-
-def _signal_behind(error: BaseException) -> BaseException | None:
-    """The KeyboardInterrupt or Terminated that `error` is or was raised from, if any."""
-    seen: set[int] = set()
-    current: BaseException | None = error
-    while current is not None and id(current) not in seen:
-        if isinstance(current, (KeyboardInterrupt, Terminated)):
-            return current
-        seen.add(id(current))
-        current = current.__cause__ or current.__context__
-    return None
-
 
 if __name__ == "__main__":
     sys.exit(main())
