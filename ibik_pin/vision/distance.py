@@ -206,29 +206,52 @@ def _distances(image, to_set):
     starts = np.empty(width + 1, np.float64)  # and where each starts to be the lowest
     for i in range(height):
         count = 0
-        for q in range(width):
+        q = 0
+        while q < width:
             g = np.int64(column[i, q])
             if g >= far:
+                q += 1
                 continue
-            offset = g * g + q * q
-            start = -np.inf
-            while count > 0:
-                start = (offset - offsets[count - 1]) / (2.0 * (q - apexes[count - 1]))
-                if start > starts[count - 1]:
-                    break
-                count -= 1
+            last = q
+            if g == 0:
+                # A run of sources: a pixel outside it is nearest to one of its ends, so only
+                # those enter the envelope (the run's own pixels are set to 0 below). Measured on
+                # silhouettes, the inside transform took 0.55-0.72 of the time of every pixel's.
+                while last + 1 < width and column[i, last + 1] == 0:
+                    last += 1
+            p = q
+            while True:
+                offset = g * g + p * p
                 start = -np.inf
-            apexes[count], offsets[count], starts[count] = q, offset, start
-            count += 1
+                while count > 0:
+                    start = (offset - offsets[count - 1]) / (2.0 * (p - apexes[count - 1]))
+                    if start > starts[count - 1]:
+                        break
+                    count -= 1
+                    start = -np.inf
+                apexes[count], offsets[count], starts[count] = p, offset, start
+                count += 1
+                if p == last:
+                    break
+                p = last
+            q = last + 1
         if count == 0:
             out[i, :] = np.inf
             continue
         starts[count] = np.inf
-        k = 0
-        for x in range(width):
-            while starts[k + 1] < x:
-                k += 1
-            out[i, x] = np.sqrt(np.float32(offsets[k] - 2 * apexes[k] * x + x * x))
+        # Parabola k is the lowest on (starts[k], starts[k + 1]]: each one's pixels in one loop.
+        x = 0
+        for k in range(count):
+            end = width if starts[k + 1] >= width - 1 else int(np.floor(starts[k + 1])) + 1
+            apex, offset = apexes[k], offsets[k]
+            for pixel in range(x, end):
+                out[i, pixel] = np.sqrt(np.float32(offset - 2 * apex * pixel + pixel * pixel))
+            x = max(x, end)
+            if x >= width:
+                break
+        for pixel in range(width):
+            if column[i, pixel] == 0:
+                out[i, pixel] = 0.0
     return out
 
 
