@@ -94,6 +94,25 @@ def test_frame_jacobians_are_pinocchios_for_every_frame_and_follow_updates(human
                                        rtol=0, atol=1e-13)
 
 
+def test_a_gradient_on_frame_positions_pulls_back_through_pinocchios_jacobians(human, rng):
+    """velocity_gradient: sum over frames of g_k . J_k / count, J_k from getFrameJacobian, for frames
+    asked in any order (repeated too) and read before or not; the positions' view stays Pinocchio's."""
+    configuration = Configuration(human.model)
+    for frames in (np.array([3, 8, 20]), np.array([20, 3, 3, 11]), np.arange(human.model.nframes)[::-1].copy()):
+        q = random_human_configuration(human, rng)
+        configuration.update(q)
+        frame_gradient = rng.normal(size=(len(frames), 3))
+        expected = sum(frame_gradient[k] @ pin.getFrameJacobian(human.model, configuration.data, int(frame),
+                                                               pin.LOCAL_WORLD_ALIGNED)[:3]
+                       for k, frame in enumerate(frames)) / 7.0
+        np.testing.assert_allclose(configuration.velocity_gradient(frames, frame_gradient, 7.0), expected,
+                                   rtol=0, atol=1e-12)
+        positions, _ = configuration.frame_arrays(frames)
+        data = human.model.createData()
+        pin.framesForwardKinematics(human.model, data, q)
+        assert np.array_equal(positions[frames], [data.oMf[int(frame)].translation for frame in frames])
+
+
 def test_frame_reads_are_kept_read_only_until_the_next_update(human, rng):
     """A set of frames asked again gives the same array, which no caller can change; an update
     gives new positions."""

@@ -25,10 +25,10 @@ from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.tasks.segments import SegmentCriterion, segment_ends
-from ibik_pin.vision.camera import CameraLike, Projection
+from ibik_pin.vision.camera import CameraLike
 from ibik_pin.vision.candidate_kernels import moved_samples
-from ibik_pin.vision.kernels import support_overlap_at_segments, support_values
-from ibik_pin.vision.pinhole import pixel_projector, projector
+from ibik_pin.vision.kernels import pinhole_overlap_at_segments, support_overlap_at_segments, support_values
+from ibik_pin.vision.pinhole import pixel_projector, projector, stacked_pinhole_parameters
 from ibik_pin.vision.support import SupportImageLike
 
 
@@ -116,6 +116,7 @@ class ImageTask(SegmentCriterion):
                 )
         self._active_views = [v for v in self.views if v.support.enabled]
         self._project = projector([view.camera for view in self._active_views])
+        self._pinholes = stacked_pinhole_parameters([view.camera for view in self._active_views])
         self._pixels = pixel_projector([view.camera for view in self._active_views])
         self.enabled = bool(self._active_views)
         self._cache_version = -1
@@ -127,16 +128,30 @@ class ImageTask(SegmentCriterion):
     def _evaluate(self, configuration: Configuration) -> tuple[float, np.ndarray]:
         if self._cache_version == configuration.version and self._cache is not None:
             return self._cache
-        points = self.sample_points(configuration)
+        positions, _ = configuration.frame_arrays(self._frame_ids)
         value = 0.0
         gradient_frames = np.zeros((len(self._frame_ids), 3))  # dh/dX of each end frame, (K, 3)
-        for view, projection in zip(self._active_views, self._project(points), strict=True):
-            value += _read_view(view, projection, self._sample_start, self._sample_end, self._sample_fraction,
-                                gradient_frames)
-        count = max(len(self._active_views), 1) * len(points)
-        jacobians = configuration.frame_translation_jacobians(self._frame_ids)  # (K, 3, nv)
-        gradient = (gradient_frames / count).reshape(-1) @ jacobians.reshape(-1, jacobians.shape[2])
-        self._cache = (value / count, gradient)
+        # Pinhole cameras place, project and read the samples in one compiled call per view; any
+        # other camera projects them itself first.
+        pinholes = self._pinholes
+        projections = [] if pinholes is not None else self._project(self._interpolation @ positions[self._frame_ids])
+        for index, view in enumerate(self._active_views):
+            width, height = view.support.size
+            for whole_frame in (False, True):  # the window around the body, unless a sample falls outside
+                values, row, column = view.support.held_values(whole_frame)
+                if pinholes is not None:
+                    total, complete = pinhole_overlap_at_segments(
+                        positions, self._frame_ids, self._sample_start, self._sample_end, self._sample_fraction,
+                        pinholes[index], values, row, column, width, height, gradient_frames)
+                else:
+                    total, complete = support_overlap_at_segments(
+                        *projections[index], values, row, column, width, height, self._sample_start,
+                        self._sample_end, self._sample_fraction, gradient_frames)
+                if complete:
+                    break
+            value += total
+        count = max(len(self._active_views), 1) * len(self._sample_start)
+        self._cache = (value / count, configuration.velocity_gradient(self._frame_ids, gradient_frames, count))
         self._cache_version = configuration.version
         return self._cache
 
@@ -232,20 +247,6 @@ class ImageTask(SegmentCriterion):
 
     def compute_gradient(self, configuration: Configuration) -> np.ndarray:
         return self._evaluate(configuration)[1]
-
-
-def _read_view(view: View, projection: Projection, sample_start: np.ndarray, sample_end: np.ndarray,
-               sample_fraction: np.ndarray, frame_gradient: np.ndarray) -> float:
-    """The sum of a view's support at the projected segment samples (0 behind the camera); adds
-    each segment end's d support / d X_world to frame_gradient (K, 3), in one compiled loop."""
-    width, height = view.support.size
-    for whole_frame in (False, True):  # the window around the body, unless a sample falls outside
-        values, row, column = view.support.held_values(whole_frame)
-        total, complete = support_overlap_at_segments(*projection, values, row, column, width, height, sample_start,
-                                                      sample_end, sample_fraction, frame_gradient)
-        if complete:
-            break
-    return total
 
 
 def support_at(view: View, points: np.ndarray, behind: float = 0.0,

@@ -125,9 +125,7 @@ class SilhouetteAxisTask(SegmentCriterion):
         if views == 0:
             self._cache = (0.0, np.zeros(configuration.model.nv))
         else:
-            jacobians = configuration.frame_translation_jacobians(self._frame_ids)  # (K, 3, nv)
-            gradient = (gradient_frames / views).reshape(-1) @ jacobians.reshape(-1, jacobians.shape[2])
-            self._cache = (value / views, gradient)
+            self._cache = (value / views, configuration.velocity_gradient(self._frame_ids, gradient_frames, views))
         self._cache_version = configuration.version
         return self._cache
 

@@ -32,7 +32,8 @@ import numpy as np
 from numba import njit
 
 __all__ = ["MIN_DEPTH", "axis_value_and_frame_gradient", "axis_value_and_pixel_gradient", "pinhole_parameters",
-           "pinhole_pixels_views", "pinhole_project", "pinhole_project_views", "support_overlap_at_segments",
+           "pinhole_overlap_at_segments", "pinhole_pixels_views", "pinhole_project", "pinhole_project_views",
+           "support_overlap_at_segments",
            "support_sample", "support_values"]
 
 # A point nearer the camera plane than this [m] is behind it: it reads 0 and pulls nowhere.
@@ -195,6 +196,39 @@ def support_overlap_at_segments(pixels, jacobians, depth, support, row0, column0
             pull = d_u * jacobians[m, 0, axis] + d_v * jacobians[m, 1, axis]
             gradient[a, axis] += (1.0 - s) * pull
             gradient[b, axis] += s * pull
+    frame_gradient += gradient
+    return total, True
+
+
+@njit(cache=True, nogil=True, error_model="numpy")  # as _project_point, inlined here
+def pinhole_overlap_at_segments(positions, frame_ids, sample_start, sample_end, sample_fraction, camera, support,
+                                row0, column0, width, height, frame_gradient):
+    """:func:`support_overlap_at_segments` of the samples placed and projected here: sample m at
+    (1 - s) X_a + s X_b, X_a = positions[frame_ids[a]] (positions (F, 3) [m] of every model frame),
+    through the pinhole `camera` (:func:`pinhole_parameters`). One call per view for the whole
+    reading (numpy's placing and the projection's wrapper were half of an arm's image step)."""
+    gradient = np.zeros_like(frame_gradient)
+    total = 0.0
+    for m in range(sample_start.shape[0]):
+        a, b, s = sample_start[m], sample_end[m], sample_fraction[m]
+        start, end = frame_ids[a], frame_ids[b]
+        u, v, depth, j00, j01, j02, j10, j11, j12 = _project_point(
+            camera, (1.0 - s) * positions[start, 0] + s * positions[end, 0],
+            (1.0 - s) * positions[start, 1] + s * positions[end, 1],
+            (1.0 - s) * positions[start, 2] + s * positions[end, 2])
+        if not depth > MIN_DEPTH:
+            continue
+        value, d_u, d_v, inside = _read_support(u, v, support, row0, column0, width, height)
+        if not inside:
+            return total, False
+        total += value
+        pull_x, pull_y, pull_z = d_u * j00 + d_v * j10, d_u * j01 + d_v * j11, d_u * j02 + d_v * j12
+        gradient[a, 0] += (1.0 - s) * pull_x
+        gradient[a, 1] += (1.0 - s) * pull_y
+        gradient[a, 2] += (1.0 - s) * pull_z
+        gradient[b, 0] += s * pull_x
+        gradient[b, 1] += s * pull_y
+        gradient[b, 2] += s * pull_z
     frame_gradient += gradient
     return total, True
 

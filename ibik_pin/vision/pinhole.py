@@ -18,7 +18,7 @@ from ibik_pin.exceptions import InputError
 from ibik_pin.vision.camera import Camera, CameraLike, Projection, _as_points, _read_only, _rotation_from_rodrigues
 from ibik_pin.vision.kernels import pinhole_parameters, pinhole_pixels_views, pinhole_project, pinhole_project_views
 
-__all__ = ["PinholeCamera", "look_at_camera", "pixel_projector", "projector"]
+__all__ = ["PinholeCamera", "look_at_camera", "pixel_projector", "projector", "stacked_pinhole_parameters"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -124,7 +124,7 @@ class PinholeCamera(Camera):
             return np.where(depth > 0.0, self.focal_px * radii / depth, np.nan)
 
 
-def _stacked_parameters(cameras: list[CameraLike]) -> np.ndarray | None:
+def stacked_pinhole_parameters(cameras: list[CameraLike]) -> np.ndarray | None:
     """The cameras' kernel parameters (V, 21) when all are pinhole cameras (one compiled call
     projects them all), else None (each camera projects itself)."""
     if not cameras or not all(isinstance(camera, PinholeCamera) for camera in cameras):
@@ -137,7 +137,7 @@ def projector(cameras: Sequence[CameraLike]) -> Callable[[np.ndarray], list[Proj
     call (the same arithmetic: a view's projection is a few microseconds of wrapper, a solver step
     projects every view twice)."""
     cameras = list(cameras)
-    parameters = _stacked_parameters(cameras)
+    parameters = stacked_pinhole_parameters(cameras)
     if parameters is None:
         return lambda points: [camera.project_with_jacobian(points) for camera in cameras]
 
@@ -155,7 +155,7 @@ def pixel_projector(cameras: Sequence[CameraLike]) -> Callable[[np.ndarray], lis
     """points (N, 3) -> each camera's pixels (N, 2) and depth (N,), without the Jacobian: what a
     reading of values needs (pinhole cameras all in one compiled call, as `projector`)."""
     cameras = list(cameras)
-    parameters = _stacked_parameters(cameras)
+    parameters = stacked_pinhole_parameters(cameras)
     if parameters is None:
         return lambda points: [(projection.pixels, projection.depth) for projection in
                                (camera.project_with_jacobian(points) for camera in cameras)]
