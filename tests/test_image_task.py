@@ -122,8 +122,11 @@ def test_any_camera_of_the_protocol_serves_a_view():
     configuration = Configuration(scene.body.model, q)
     task = ImageTask(scene.body, [View(RenamedCamera(scene.camera, "wrapped"), scene.support)])
     reference = ImageTask(scene.body, [View(scene.camera, scene.support)])
-    assert task.compute_value(configuration) == reference.compute_value(configuration)
-    np.testing.assert_array_equal(task.compute_gradient(configuration), reference.compute_gradient(configuration))
+    # A pinhole camera's samples are placed in the compiled reading, any other's by a product
+    # (BLAS): the same values within rounding.
+    assert task.compute_value(configuration) == pytest.approx(reference.compute_value(configuration), rel=1e-12)
+    np.testing.assert_allclose(task.compute_gradient(configuration), reference.compute_gradient(configuration),
+                               rtol=1e-12, atol=1e-12)
     small = SupportImage(np.zeros((240, 320), dtype=np.float32))
     with pytest.raises(InputError, match="camera 'wrapped': the support image"):
         View(RenamedCamera(scene.camera, "wrapped"), small)

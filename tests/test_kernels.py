@@ -5,7 +5,7 @@ import pytest
 
 from ibik_pin.tasks.image import View, support_at
 from ibik_pin.vision.camera import OrthographicCamera
-from ibik_pin.vision.kernels import support_overlap_at_segments
+from ibik_pin.vision.kernels import pinhole_overlap_at_segments, support_overlap_at_segments
 from ibik_pin.vision.pinhole import PinholeCamera
 from ibik_pin.vision.support import SupportImage, support_from_mask
 
@@ -124,6 +124,39 @@ def test_a_samples_pull_goes_to_its_segments_ends_in_proportion(rng):
                                                   fraction, frame_gradient)
     assert complete and total == pytest.approx(plain_reading(projection, support)[0].sum(), rel=1e-12)
     np.testing.assert_allclose(frame_gradient, interpolation.T @ point_gradient, rtol=1e-10, atol=1e-12)
+
+
+def test_the_pinhole_overlap_places_and_projects_the_samples_as_the_plain_path_does(rng):
+    """Samples placed from the frames' positions (model frames picked by frame_ids) and projected
+    in the compiled call: the product's samples projected by the camera and read, within rounding;
+    on the window, a sample outside it makes the read incomplete and adds nothing."""
+    camera = distorted_camera(rng)
+    model_frames, ends = 14, 9
+    frame_ids = rng.permutation(model_frames)[:ends]
+    completes = []
+    for support, whole_frame in ((SupportImage(silhouette_support().values), False), (silhouette_support(), False),
+                                 (silhouette_support(), True)):
+        positions = np.zeros((model_frames, 3))
+        positions[frame_ids] = points_around(camera, rng, ends)
+        positions[frame_ids[2:]] = camera.center_world + 3.0 * camera.rotation[2] + rng.normal(0.0, 0.2, (ends - 2, 3))
+        start, end = rng.integers(0, ends, 80), rng.integers(0, ends, 80)
+        fraction = rng.uniform(0.0, 1.0, 80)
+        weights = fraction[:, None]
+        samples = (1.0 - weights) * positions[frame_ids[start]] + weights * positions[frame_ids[end]]
+        values, row, column = support.held_values(whole_frame)
+        expected_gradient = np.zeros((ends, 3))
+        expected, expected_complete = support_overlap_at_segments(
+            *camera.project_with_jacobian(samples), values, row, column, *support.size, start, end, fraction,
+            expected_gradient)
+        frame_gradient = np.zeros((ends, 3))
+        total, complete = pinhole_overlap_at_segments(positions, frame_ids, start, end, fraction,
+                                                      camera.kernel_parameters, values, row, column, *support.size,
+                                                      frame_gradient)
+        assert complete == expected_complete
+        assert total == pytest.approx(expected, rel=1e-12, abs=1e-12)
+        np.testing.assert_allclose(frame_gradient, expected_gradient, rtol=1e-10, atol=1e-12)
+        completes.append(complete)
+    assert completes == [True, False, True]  # the window alone misses the samples far out
 
 
 def test_a_nan_pixel_reads_nothing_and_pulls_nowhere():
