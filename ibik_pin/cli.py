@@ -224,6 +224,7 @@ class Terminated(BaseException):
 # half-way; CI saw a segfault from SIGTERM while a kernel was compiled into a cold cache.
 _UNINTERRUPTIBLE_MODULES = ("numba.", "llvmlite.")
 _RETRY_SECONDS = 0.02
+_CAN_RETRY = hasattr(signal, "setitimer") and hasattr(signal, "SIGALRM")
 _pending_signal: list[type[BaseException]] = []  # the signal taken and not yet raised, at most one
 
 
@@ -239,11 +240,11 @@ def _raise_where_safe(signal_number: int, frame: types.FrameType | None) -> None
     """SIGTERM as Terminated, SIGINT as KeyboardInterrupt, raised where the program is so that every
     cleanup (the staging folder) runs; inside Numba's compiler, retried by SIGALRM every 20 ms until
     the program is out of it."""
-    if signal_number != signal.SIGALRM and not _pending_signal:
+    if signal_number in (signal.SIGTERM, signal.SIGINT) and not _pending_signal:
         _pending_signal.append(Terminated if signal_number == signal.SIGTERM else KeyboardInterrupt)
     if not _pending_signal:
         return  # an alarm that is not ours to act on
-    if _inside_uninterruptible(frame):
+    if _CAN_RETRY and _inside_uninterruptible(frame):
         signal.setitimer(signal.ITIMER_REAL, _RETRY_SECONDS)
         return
     raise _pending_signal.pop()()
@@ -251,17 +252,18 @@ def _raise_where_safe(signal_number: int, frame: types.FrameType | None) -> None
 
 @contextlib.contextmanager
 def _signals_raised_where_safe() -> Iterator[None]:
-    """Install _raise_where_safe for the run (where the platform has the alarm to retry with), and put
-    back the handlers there were."""
-    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "setitimer"):
+    """Install _raise_where_safe for the run, and put back the handlers there were (where the
+    platform has no alarm to retry with, Windows, the signals are raised at once)."""
+    if threading.current_thread() is not threading.main_thread():
         yield
         return
-    handled = (signal.SIGTERM, signal.SIGINT, signal.SIGALRM)
+    handled = (signal.SIGTERM, signal.SIGINT, signal.SIGALRM) if _CAN_RETRY else (signal.SIGTERM, signal.SIGINT)
     previous = {number: signal.signal(number, _raise_where_safe) for number in handled}
     try:
         yield
     finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
+        if _CAN_RETRY:
+            signal.setitimer(signal.ITIMER_REAL, 0)
         _pending_signal.clear()
         for number, handler in previous.items():
             signal.signal(number, handler)
