@@ -14,6 +14,8 @@ in one call per view.
   support image by bilinear interpolation with the interpolant's exact derivative: at pixels
   (:meth:`ibik_pin.vision.support.SupportImage.sample`); at projected samples along segments, their
   sum and each segment end's d support / d X_world; or the values alone at projected points.
+  :func:`pinhole_overlap_at_segments`: the segments' reading with the samples placed from the
+  frames' positions and projected through a pinhole camera in the same loop.
 - :func:`axis_value_and_pixel_gradient`: the silhouette-axis term of one view and its derivative
   with respect to the projected segment ends (:func:`axis_value_and_frame_gradient`: with respect
   to the ends in the world) (:mod:`ibik_pin.tasks.silhouette_axis`).
@@ -31,10 +33,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["MIN_DEPTH", "axis_value_and_frame_gradient", "axis_value_and_pixel_gradient", "pinhole_parameters",
-           "pinhole_overlap_at_segments", "pinhole_pixels_views", "pinhole_project", "pinhole_project_views",
-           "support_overlap_at_segments",
-           "support_sample", "support_values"]
+__all__ = ["MIN_DEPTH", "axis_value_and_frame_gradient", "axis_value_and_pixel_gradient", "pinhole_overlap_at_segments",
+           "pinhole_parameters", "pinhole_pixels_views", "pinhole_project", "pinhole_project_views",
+           "support_overlap_at_segments", "support_sample", "support_values"]
 
 # A point nearer the camera plane than this [m] is behind it: it reads 0 and pulls nowhere.
 MIN_DEPTH = 1e-6
