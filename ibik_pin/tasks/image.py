@@ -134,7 +134,7 @@ class ImageTask(SegmentCriterion):
         # Pinhole cameras place, project and read the samples in one compiled call per view; any
         # other camera projects them itself first.
         pinholes = self._pinholes
-        projections = [] if pinholes is not None else self._project(self._interpolation @ positions[self._frame_ids])
+        projections = [] if pinholes is not None else self._project(self.sample_points(configuration))
         for index, view in enumerate(self._active_views):
             width, height = view.support.size
             for whole_frame in (False, True):  # the window around the body, unless a sample falls outside

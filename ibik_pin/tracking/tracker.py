@@ -49,6 +49,12 @@ from ibik_pin.vision.segmentation import TemporalMajority
 SilhouetteSource = Callable[[int], Sequence[np.ndarray]]
 
 
+def _take_outcomes(result: TrackingResult, offloaded: dict[int, object]) -> None:
+    """The level outcomes the image process's child sent back (their fields), into their frames."""
+    for frame, outcomes in offloaded.items():
+        result.level_outcomes[frame] = [LevelOutcome(*fields) for fields in cast(list, outcomes)]
+
+
 class Tracker:
     """Solves a sequence of frames with one body, one camera set and one solver kept alive."""
 
@@ -282,12 +288,10 @@ class Tracker:
                 else:
                     result.level_outcomes.append(level_outcomes(plan, configuration, statuses, report_index,
                                                                 self.solver.damping))
-                for done, outcomes in images.results().items():
-                    result.level_outcomes[done] = [LevelOutcome(*fields) for fields in cast(list, outcomes)]
+                _take_outcomes(result, images.results())
                 if progress is not None:
                     progress()
-            for done, outcomes in images.finish_jobs().items():
-                result.level_outcomes[done] = [LevelOutcome(*fields) for fields in cast(list, outcomes)]
+            _take_outcomes(result, images.finish_jobs())
         result.loop_seconds = time.perf_counter() - loop_started
         return result
 
