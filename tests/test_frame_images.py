@@ -187,8 +187,8 @@ def _offloaded_frames(rig, frames, job=_job, wait_s=0.02):
 def test_jobs_offloaded_to_the_child_run_there_on_their_frames_images_and_all_come_back(rig):
     frames = 12
     offloaded, results = _offloaded_frames(rig, frames)
-    # The child gets as far ahead as its slots allow (two frames) while the parent waits, which it
-    # cannot on the last two frames: none follow.
+    # The child gets two frames ahead (child_is_ahead) while the parent waits, which it cannot on
+    # the last two frames: none follow.
     assert set(offloaded) <= set(range(frames - 2)) and len(offloaded) >= frames // 2
     assert sorted(results) == offloaded
     for frame in offloaded:
@@ -196,6 +196,49 @@ def test_jobs_offloaded_to_the_child_run_there_on_their_frames_images_and_all_co
         assert (done_frame, payload) == (frame, f"payload {frame}")
         assert pid != os.getpid()
         assert disabled == (["side"] if frame % FRAMES == 2 else [])  # the rig's third frame, on its images
+    assert not _children()
+
+
+def test_the_child_gets_far_ahead_while_the_first_frame_is_solved_and_its_jobs_find_their_images(rig):
+    """While the parent searches the first frame's pose the child fills every slot of the mapping
+    (as many as fit its budget, up to MAX_SLOTS), not only the few the parent holds; the jobs sent
+    while it is that far ahead still read their own frames' images."""
+    import time
+
+    from ibik_pin.tracking.image_process import MAX_SLOTS, MIN_SLOTS
+
+    cameras, masks = rig
+    frames = MAX_SLOTS + 8
+    source = Source([masks[frame % FRAMES] for frame in range(frames)])
+    prepared = multiprocessing.Value("i", 0)
+
+    def counting(frame):
+        with prepared.get_lock():
+            prepared.value += 1
+        return prepare(source, cameras, frame)
+
+    offloaded, results = [], {}
+    with FrameImagesAhead(counting, frames, "process", job=_job) as images:
+        images.get(0)
+        deadline = time.monotonic() + 20.0
+        while prepared.value < MAX_SLOTS and time.monotonic() < deadline:  # the first frame's search
+            time.sleep(0.01)
+        time.sleep(0.1)
+        ahead = prepared.value - 1  # frame 0 is prepared here
+        for frame in range(frames):
+            if frame:
+                images.get(frame)
+            if images.offload(frame, f"payload {frame}"):
+                offloaded.append(frame)
+            results.update(images.results())
+        results.update(images.finish_jobs())
+    # Every slot filled (small views: the budget holds MAX_SLOTS of them) and one more frame
+    # prepared, waiting for a slot.
+    assert ahead == MAX_SLOTS + 1 > MIN_SLOTS + 1
+    assert len(offloaded) >= MAX_SLOTS and sorted(results) == offloaded
+    for frame in offloaded:
+        assert results[frame][:2] == (frame, f"payload {frame}")
+        assert results[frame][3] == (["side"] if frame % FRAMES == 2 else [])
     assert not _children()
 
 

@@ -26,10 +26,10 @@ ALIGNMENT = 64  # bytes; each array starts on a cache line
 
 
 class FrameSlots:
-    """Writes and reads arrays at offsets of one slot of the shared mapping."""
+    """Writes and reads arrays at offsets of the `count` slots of the shared mapping."""
 
-    def __init__(self, memory: mmap.mmap, slot_bytes: int) -> None:
-        self.memory, self.slot_bytes = memory, slot_bytes
+    def __init__(self, memory: mmap.mmap, slot_bytes: int, count: int) -> None:
+        self.memory, self.slot_bytes, self.count = memory, slot_bytes, count
 
     def write(self, slot: int, arrays: list[np.ndarray]) -> list:
         """Each array's place: (offset, shape, dtype) in the slot, or the array itself if the slot is full."""

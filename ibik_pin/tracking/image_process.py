@@ -8,12 +8,14 @@ beside that thread than alone (6.3 against 4.5 ms a frame). A child process has 
 How: the parent prepares frame 0 itself, then forks; the child, a copy of the parent at that point
 (the silhouette source with its state, the cameras, nothing pickled), prepares frames 1, 2, ... in
 order. Each frame's arrays (support windows; the silhouettes bit-packed with their inside
-distances, for a read outside a window; medial axes) are written into one of a few slots of an
+distances, for a read outside a window; medial axes) are written into one of the slots of an
 anonymous shared mapping, and a small message through a pipe says where. The parent reads them in
 place and hands the slot back once two more frames have been asked for: a frame's images stay
 valid while the next frame is set up. An array that does not fit its slot travels in the message
-instead. Per-frame figures the source keeps (the silhouette quality report's) come back with each
-frame.
+instead. With up to 32 slots the child gets far ahead while the parent searches the first frame's
+pose (on the paper's arm, about 45 frames in the search's 55 ms; frames/s over the frames after
+the first went 668 -> 847 against 4 slots, means of nine runs each). Per-frame figures the source
+keeps (the silhouette quality report's) come back with each frame.
 
 The child also runs jobs the parent sends (`submit`): a job reads a frame's images and whatever
 the child's copy of the parent's objects holds. The tracker sends it a frame's level outcomes
@@ -48,14 +50,16 @@ from ibik_pin.tracking.frame_slots import FrameSlots, pack_frame, slot_bytes_for
 __all__ = ["FrameRecords", "ImageProcess", "can_fork"]
 
 # Slots of the shared mapping: the frame being solved and the one before keep theirs (their arrays
-# are read in place), the child prepares the next frames in the others.
-SLOTS = 4
+# are read in place), the child prepares the next frames in the others, as far ahead as they go: it
+# gets ahead while the parent runs the first frame's search (tens of ms), and the lead absorbs the
+# two processes' jitter. As many slots as fit SLOT_BUDGET_BYTES, within MIN_SLOTS .. MAX_SLOTS
+# (the mapping's pages take memory only once written).
+MIN_SLOTS, MAX_SLOTS = 4, 32
+SLOT_BUDGET_BYTES = 128 << 20
 HELD = 2
+# Frames ready beyond the one being solved from which the child counts as ahead (child_is_ahead).
+AHEAD = 2
 _STOP_WAIT_S = 5.0
-# Frames whose images the child keeps for jobs. A job comes for the frame the parent has just
-# solved, t: the parent then holds the slots of t - 1 and t, so the child has sent t + 2 at most and
-# prepared t + 3; jobs come in order, so the frames up to a job's are dropped with it.
-KEPT_FOR_JOBS = SLOTS + 2
 
 
 def can_fork() -> bool:
@@ -93,8 +97,13 @@ def _child(prepare: Callable, frame_count: int, connection, slots: FrameSlots, r
     # opencv-python#249); without threads its functions run in the calling thread.
     cv2.setNumThreads(0)
     warnings.simplefilter("ignore")  # the parent reports what matters; the child writes nothing
-    free = list(range(SLOTS))
-    kept = {0: first} if job is not None else {}  # the images of the last frames prepared, for the jobs
+    free = list(range(slots.count))
+    # The images of the last frames prepared, for the jobs. A job comes for the frame the parent has
+    # just solved, t: the parent then holds the slots of t - 1 and t, so the child has sent
+    # t + count - 2 at most and prepared one more; jobs come in order, so the frames up to a job's
+    # are dropped with it.
+    kept = {0: first} if job is not None else {}
+    kept_for_jobs = slots.count + 2
 
     def handle(message) -> bool:
         """A slot handed back, or a job run and its result sent; False after a failed job."""
@@ -121,7 +130,7 @@ def _child(prepare: Callable, frame_count: int, connection, slots: FrameSlots, r
             return
         if job is not None:
             kept[frame] = images
-            kept.pop(frame - KEPT_FOR_JOBS, None)
+            kept.pop(frame - kept_for_jobs, None)
         while not free:
             if not handle(connection.recv()):
                 return
@@ -193,8 +202,9 @@ class ImageProcess:
 
     def _start(self, first) -> None:
         slot_bytes = slot_bytes_for(first)
-        self._memory = mmap.mmap(-1, SLOTS * slot_bytes)  # anonymous and shared: the child writes into it
-        self._slots = FrameSlots(self._memory, slot_bytes)
+        count = min(max(SLOT_BUDGET_BYTES // slot_bytes, MIN_SLOTS), MAX_SLOTS, self._frame_count + HELD)
+        self._memory = mmap.mmap(-1, count * slot_bytes)  # anonymous and shared: the child writes into it
+        self._slots = FrameSlots(self._memory, slot_bytes, count)
         context = multiprocessing.get_context("fork")
         self._connection, child_end = context.Pipe(duplex=True)
         for stream in (sys.stdout, sys.stderr):  # nothing buffered to be written twice by the child
@@ -252,10 +262,10 @@ class ImageProcess:
         return unpack_frame(description, arrays, self._cameras)
 
     def child_is_ahead(self) -> bool:
-        """Whether the child has prepared as many frames ahead as its slots allow (it then waits for
-        the parent): a job sent now costs the parent nothing it would not spend waiting. With fewer
-        frames ready the child is keeping pace at best (four large views), and the parent had
-        better do the work itself."""
+        """Whether the child has AHEAD frames ready beyond the one being solved: it is keeping ahead
+        of the parent, and a job sent now costs the parent nothing it would not spend waiting. With
+        fewer frames ready the child is keeping pace at best (four large views), and the parent had
+        better do the work itself; a lead spent on jobs is thus never spent below AHEAD frames."""
         if self._connection is None:
             return False
         with contextlib.suppress(EOFError, OSError):  # a child that ended is found out at the next frame
@@ -265,7 +275,7 @@ class ImageProcess:
                     self._take_result(message)
                 else:  # frames and errors, in order, for _next_message
                     self._waiting.append(message)
-        return sum(message[0] == "frame" for message in self._waiting) >= SLOTS - HELD
+        return sum(message[0] == "frame" for message in self._waiting) >= AHEAD
 
     def submit(self, frame: int, payload: object) -> bool:
         """Send `job(frame, images, payload)` to the child; False (nothing sent) without a child or
