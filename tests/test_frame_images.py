@@ -330,10 +330,33 @@ def test_the_shared_distance_transform_gives_the_support_and_medial_axis_compute
         np.testing.assert_array_equal(images.axis_views[0].pixels, medial_axis_pixels(mask))
 
 
-def test_without_medial_axes_none_are_built(rig):
+def test_without_medial_axes_none_are_built_and_the_supports_are_those_computed_alone(rig):
+    """Without a medial axis the inside distance is computed only up to the cap (half a pixel
+    more): the supports are the same to the bit."""
     cameras, masks = rig
-    images = frame_images(Source(masks), cameras, [4.0, 4.0], None, 0)
-    assert images.axis_views is None and len(images.views) == 2
+    for frame in range(FRAMES):
+        images = frame_images(Source(masks), cameras, [4.0, 2.5], None, frame)
+        assert images.axis_views is None and len(images.views) == 2
+        for view, mask, cap in zip(images.views, masks[frame], (4.0, 2.5), strict=True):
+            if mask.any():
+                np.testing.assert_array_equal(view.support.values, support_from_mask(mask, cap).values)
+
+
+def test_supports_without_medial_axes_sent_by_the_child_give_the_whole_frame_computed_alone(rig):
+    """Their inside distances, exact up to the cap only, travel with their limit: a read outside
+    the window in the parent computes the same whole frame."""
+    cameras, masks = rig
+    source = Source(masks)
+    windowed = 0
+    with FrameImagesAhead(lambda frame: frame_images(source, cameras, [4.0, 2.5], None, frame), FRAMES,
+                          "process") as images:
+        for frame in range(FRAMES):
+            for view, mask, cap in zip(images.get(frame).views, masks[frame], (4.0, 2.5), strict=True):
+                if mask.any():
+                    windowed += view.support.held_values()[0].shape != mask.shape
+                    np.testing.assert_array_equal(view.support.values, support_from_mask(mask, cap).values)
+    assert windowed >= FRAMES
+    assert not _children()
 
 
 def test_target_boxes_hold_every_target_seen_in_front_of_each_camera(rig):

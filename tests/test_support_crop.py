@@ -193,3 +193,47 @@ def test_a_window_that_also_covers_a_box_reads_it_on_the_window_with_the_whole_f
             assert np.array_equal(support_from_mask(mask, 4.0, None, smooth_sigma_px, also_around=odd).values,
                                   reference.values)
     assert checked > 15
+
+
+@pytest.mark.parametrize("cap", [1.0, 2.5, 6.0, 13.7])
+def test_an_inside_distance_exact_up_to_a_limit_gives_the_capped_support_of_the_whole_transform(cap):
+    """The transform that leaves out the columns farther than the limit: exact values up to it,
+    values beyond it where the distance is; the supports it gives, windowed and whole-frame, are the
+    same to the bit."""
+    from ibik_pin.vision.distance import inside_distance
+
+    masks = list(random_silhouettes(seed=11, count=60, size=(90, 130)))
+    rng = np.random.default_rng(12)
+    for _ in range(20):  # speckle: runs of every length
+        masks.append((rng.random((60, 80)) < rng.uniform(0.3, 0.95)).astype(np.uint8))
+    for mask in masks:
+        scanned = scan_mask(mask)
+        if scanned.box is None or scanned.set_pixels == mask.size:
+            continue
+        exact = inside_distance(scanned.mask, scanned.box)
+        limited = inside_distance(scanned.mask, scanned.box, limit=cap + 0.5)
+        assert limited.limit == cap + 0.5 and exact.limit is None
+        within = exact.values <= cap + 0.5
+        assert np.array_equal(limited.values[within], exact.values[within])
+        assert np.all(limited.values[~within] > cap + 0.5)
+        expected = support_from_mask(mask, inside_cap_px=cap)
+        support = support_from_mask(scanned, inside_cap_px=cap, inside=limited)
+        window, row, column = support.held_values()
+        whole, _, _ = expected.held_values(whole_frame=True)
+        assert np.array_equal(window, whole[row:row + window.shape[0], column:column + window.shape[1]])
+        assert np.array_equal(support.values, expected.values)
+
+
+def test_a_limited_inside_distance_is_refused_where_more_of_it_is_read():
+    from ibik_pin.vision.distance import inside_distance
+
+    mask = next(iter(random_silhouettes(seed=2, count=5)))
+    scanned = scan_mask(mask)
+    limited = inside_distance(scanned.mask, scanned.box, limit=4.5)
+    with pytest.raises(InputError, match=r"exact up to 4\.5 px only"):
+        support_from_mask(scanned, inside_cap_px=4.5, inside=limited)
+    with pytest.raises(InputError, match=r"exact up to 4\.5 px only"):
+        support_from_mask(scanned, inside_cap_px=None, inside=limited)
+    support_from_mask(scanned, inside_cap_px=4.0, inside=limited)  # within: accepted
+    # The medial axis needs every depth: it computes its own rather than read the limited one.
+    assert np.array_equal(medial_axis_pixels(mask, inside=limited), medial_axis_pixels(mask))

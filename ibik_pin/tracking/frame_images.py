@@ -73,7 +73,8 @@ def frame_images(source: Callable[[int], Sequence[np.ndarray]], cameras: Sequenc
             views.append(View(camera, SupportImage(np.zeros(scanned.mask.shape, np.float32), enabled=False)))
             axes.append(np.zeros((0, 2)))
             continue
-        inside = inside_distance(scanned.mask, scanned.box)
+        # Without a medial axis only the capped support reads the inside distance.
+        inside = inside_distance(scanned.mask, scanned.box, None if axis_scales is not None else caps[index] + 0.5)
         around = None
         if target_boxes is not None:
             top, bottom, left, right = (int(value) for value in target_boxes[frame, index])

@@ -74,7 +74,7 @@ def pack_frame(images) -> tuple[tuple, list[np.ndarray]]:
         parts = windowed_parts(view.support)
         if parts is not None:  # the arrays by their index in `arrays`
             views.append(("window", add(parts.values), parts.row, parts.column, parts.size, add(parts.mask_bits),
-                          add(parts.inside_values), parts.inside_box, parts.silhouette_box,
+                          add(parts.inside_values), parts.inside_box, parts.silhouette_box, parts.inside_limit,
                           parts.inside_cap_px, parts.outside_cap_px, parts.smooth_sigma_px))
         else:
             views.append(("values", add(view.support.values), view.support.enabled))
@@ -90,9 +90,11 @@ def unpack_frame(description: tuple, arrays: list[np.ndarray], cameras: list):
     views = []
     for camera, (kind, values, *fields) in zip(cameras, views_packed, strict=True):
         if kind == "window":
-            row, column, size, bits, inside, inside_box, silhouette_box, inside_cap, outside_cap, sigma = fields
+            row, column, size, bits, inside, inside_box, silhouette_box, inside_limit, inside_cap, outside_cap, sigma \
+                = fields
             support = support_from_parts(WindowedParts(arrays[values], row, column, size, arrays[bits], arrays[inside],
-                                                       inside_box, silhouette_box, inside_cap, outside_cap, sigma))
+                                                       inside_box, silhouette_box, inside_limit, inside_cap,
+                                                       outside_cap, sigma))
         else:
             support = SupportImage(arrays[values], enabled=fields[0])
         views.append(View(camera, support))

@@ -23,14 +23,17 @@ class InsideDistance(NamedTuple):
     """A silhouette's distance to the background on its bounding box grown by one pixel.
 
     Attributes:
-        values: (h, w) float32 distance [px] of each pixel of `box` to the nearest unset pixel.
+        values: (h, w) float32 distance [px] of each pixel of `box` to the nearest unset pixel; with
+            a `limit`, exact up to it, and above it (infinity included) where the distance is.
         box: (rows, columns) the silhouette's bounding box grown by one pixel, clipped to the frame.
         silhouette_box: (rows, columns) the silhouette's bounding box (box_around(mask)).
+        limit: None, or the distance [px] up to which the values are exact.
     """
 
     values: np.ndarray
     box: tuple[slice, slice]
     silhouette_box: tuple[slice, slice]
+    limit: float | None = None
 
 
 class ScannedMask(NamedTuple):
@@ -92,14 +95,21 @@ def _scan(mask):
     return copy, count, row_start, row_stop, column_start, column_stop
 
 
-def inside_distance(mask: np.ndarray, box: tuple[slice, slice] | None = None) -> InsideDistance:
+def inside_distance(mask: np.ndarray, box: tuple[slice, slice] | None = None,
+                    limit: float | None = None) -> InsideDistance:
     """The distance to the background of a non-empty (H, W) bool mask on its bounding box grown by
     one pixel (`box`: that bounding box if known, box_around(mask)); what both the support image
-    and the medial axis read, computed once for them."""
+    and the medial axis read, computed once for them. `limit` [px]: the values need only be exact
+    up to it (a capped support's, without a medial axis, which needs them all): the transform then
+    leaves out the pixels whose column alone puts them farther, a quarter of its time on silhouettes.
+    """
     box = box_around(mask) if box is None else box
     grown_box = grown(box, 1, mask.shape)
+    # A pixel within `limit` of its nearest source lies within `limit` of it along its column too.
+    column_limit = -1 if limit is None else int(np.floor(limit))
     # The compiled transform reads the strided view: no contiguous copy first.
-    return InsideDistance(_distances(mask[grown_box].view(np.uint8), False), grown_box, box)
+    return InsideDistance(_distances(mask[grown_box].view(np.uint8), False, column_limit), grown_box, box,
+                          None if limit is None else float(limit))
 
 
 def signed_distance(mask: np.ndarray, region: tuple[slice, slice] | None = None,
@@ -136,7 +146,7 @@ def _signed(region, inside, row, column, inside_pixels, cap):
     """0.5 - the distance to the set pixels over `region` (h, w); on the set pixels of the box
     (`inside_pixels`, at (row, column) of the region), inside - 0.5, at most `cap` (NaN: no cap).
     The same float32 arithmetic as numpy's on the arrays."""
-    values = _distances(region, True)
+    values = _distances(region, True, -1)
     half = np.float32(0.5)
     height, width = values.shape
     for i in range(height):
@@ -168,7 +178,7 @@ def distance_to_background(image: np.ndarray) -> np.ndarray:
     lies within the part, and ties (ridges) are exact.
     """
     image = _as_uint8(image)
-    return _distances(image, False) if image.size else np.zeros(image.shape, np.float32)
+    return _distances(image, False, -1) if image.size else np.zeros(image.shape, np.float32)
 
 
 def _as_uint8(image: np.ndarray) -> np.ndarray:
@@ -182,15 +192,17 @@ def _as_uint8(image: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True)
-def _distances(image, to_set):
+def _distances(image, to_set, column_limit):
     """Exact Euclidean distance of every pixel to the nearest source pixel: the set pixels with
     `to_set`, else the zero ones. Felzenszwalb and Huttenlocher's separable transform: each
     column's distance to its nearest source, then along each row the lower envelope of the
-    parabolas (x - p)^2 + g_p^2, all in whole numbers of squared pixels.
+    parabolas (x - p)^2 + g_p^2, all in whole numbers of squared pixels. With `column_limit` >= 0,
+    only the parabolas of g_p <= column_limit: exact up to column_limit, above it beyond.
     (OpenCV's precise transform gives the same values on two threads in 1.3-2.5 times the time:
     one computed here in one thread leaves the other core to the solver.)"""
     height, width = image.shape
     far = height + width  # beyond any distance within the image: no source in that column
+    skipped = far if column_limit < 0 else min(column_limit + 1, far)  # a column distance left out
     column = np.empty((height, width), np.int32)
     for j in range(width):
         column[0, j] = 0 if (image[0, j] != 0) == to_set else far
@@ -209,7 +221,7 @@ def _distances(image, to_set):
         q = 0
         while q < width:
             g = np.int64(column[i, q])
-            if g >= far:
+            if g >= skipped:
                 q += 1
                 continue
             last = q

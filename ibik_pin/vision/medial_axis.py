@@ -34,7 +34,8 @@ def medial_axis_pixels(
         max_points: at most this many pixels, taken evenly along the found ones.
         inside: the mask's vision.distance.inside_distance if known (the support image's): used
             when its box is not cut by the frame's edge, where the medial axis takes the frame's
-            edge for a border and the support does not.
+            edge for a border and the support does not, and its values are exact at every depth
+            (no `limit`).
 
     Returns:
         (N, 2) pixel coordinates (u, v) = (column, row) [px], N possibly 0.
@@ -45,7 +46,7 @@ def medial_axis_pixels(
     if int(spacing_px) < 1 or int(max_points) < 1:
         raise InputError(f"spacing_px and max_points must be >= 1, got {spacing_px} and {max_points}")
     # Only the silhouette's bounding box: outside it the depth is 0 and no pixel is on the ridge.
-    if inside is not None and inside.box == _padded(inside.silhouette_box):
+    if inside is not None and inside.limit is None and inside.box == _padded(inside.silhouette_box):
         box_rows, box_columns = inside.silhouette_box  # the same pixels: the box and its ring of background
         depth = inside.values
     else:

@@ -227,7 +227,8 @@ def support_from_mask(
         inside_cap_px: cap of the inside distance [px]; None for no cap.
         outside_cap_px: truncation of the outside distance [px]; None for none.
         smooth_sigma_px: standard deviation of the Gaussian blur [px]; 0 for none.
-        inside: the mask's vision.distance.inside_distance if known (shared with the medial axis).
+        inside: the mask's vision.distance.inside_distance if known (shared with the medial axis);
+            one computed with a `limit` needs an inside cap of at most limit - 0.5 px.
         also_around: (rows, columns) of the frame that the window of computed values covers besides
             the silhouette (where the skeleton is expected: the tracker's projected targets). A read
             outside the window computes the whole frame, which costs most where silhouettes are
@@ -261,6 +262,10 @@ def support_from_mask(
         return SupportImage(np.full(mask.shape, inside_value, np.float32))
     if inside is None:
         inside = inside_distance(mask, scanned.box)
+    elif inside.limit is not None and (inside_cap_px is None or inside_cap_px + 0.5 > inside.limit):
+        # The support reads the inside distance less half a pixel, capped (vision.distance.signed_distance).
+        raise InputError(f"inside: its values are exact up to {inside.limit} px only, which an inside cap "
+                         f"of {inside_cap_px} px exceeds (the cap must be at most limit - 0.5)")
     recipe = _Recipe(mask, inside, inside_cap_px, outside_cap_px, smooth_sigma_px)
     box = inside.silhouette_box
     if also_around is not None:

@@ -27,8 +27,8 @@ Box = tuple[int, int, int, int]  # first row, row past the last, first column, c
 class WindowedParts(NamedTuple):
     """A windowed support of support_from_mask: its window's values (h, w) float32 from (row,
     column) of a frame of `size` (w, h); the silhouette as np.packbits of its (H, W) mask; its inside
-    distance (h', w') float32 on `inside_box` and the silhouette's box; support_from_mask's
-    parameters."""
+    distance (h', w') float32 on `inside_box`, the silhouette's box and the inside distance's limit;
+    support_from_mask's parameters."""
 
     values: np.ndarray
     row: int
@@ -38,6 +38,7 @@ class WindowedParts(NamedTuple):
     inside_values: np.ndarray
     inside_box: Box
     silhouette_box: Box
+    inside_limit: float | None
     inside_cap_px: float | None
     outside_cap_px: float | None
     smooth_sigma_px: float
@@ -59,7 +60,7 @@ def windowed_parts(support: SupportImage) -> WindowedParts | None:
     window = cast(_Window, support._window)
     return WindowedParts(window.values, window.row, window.column, support.size, np.packbits(recipe.mask),
                          recipe.inside.values, _box(recipe.inside.box), _box(recipe.inside.silhouette_box),
-                         recipe.inside_cap_px, recipe.outside_cap_px, recipe.smooth_sigma_px)
+                         recipe.inside.limit, recipe.inside_cap_px, recipe.outside_cap_px, recipe.smooth_sigma_px)
 
 
 def support_from_parts(parts: WindowedParts) -> SupportImage:
@@ -77,5 +78,6 @@ def _whole_frame_of_parts(parts: WindowedParts) -> np.ndarray:
     """The whole frame as support_from_mask's own windowed support computes it."""
     width, height = parts.size
     mask = np.unpackbits(parts.mask_bits, count=width * height).reshape(height, width).view(bool)
-    inside = InsideDistance(parts.inside_values, _slices(parts.inside_box), _slices(parts.silhouette_box))
+    inside = InsideDistance(parts.inside_values, _slices(parts.inside_box), _slices(parts.silhouette_box),
+                            parts.inside_limit)
     return _Recipe(mask, inside, parts.inside_cap_px, parts.outside_cap_px, parts.smooth_sigma_px).values(None)
