@@ -115,6 +115,8 @@ class ImageTask(SegmentCriterion):
                     stacklevel=2,
                 )
         self._active_views = [v for v in self.views if v.support.enabled]
+        # What each view's support holds (its window until a sample falls outside), read once.
+        self._held = [view.support.held_values() for view in self._active_views]
         self._project = projector([view.camera for view in self._active_views])
         self._pinholes = stacked_pinhole_parameters([view.camera for view in self._active_views])
         self._pixels = pixel_projector([view.camera for view in self._active_views])
@@ -137,8 +139,8 @@ class ImageTask(SegmentCriterion):
         projections = [] if pinholes is not None else self._project(self.sample_points(configuration))
         for index, view in enumerate(self._active_views):
             width, height = view.support.size
-            for whole_frame in (False, True):  # the window around the body, unless a sample falls outside
-                values, row, column = view.support.held_values(whole_frame)
+            for _ in range(2):  # the window around the body, unless a sample falls outside
+                values, row, column = self._held[index]
                 if pinholes is not None:
                     total, complete = pinhole_overlap_at_segments(
                         positions, self._frame_ids, self._sample_start, self._sample_end, self._sample_fraction,
@@ -149,6 +151,7 @@ class ImageTask(SegmentCriterion):
                         self._sample_end, self._sample_fraction, gradient_frames)
                 if complete:
                     break
+                self._held[index] = view.support.held_values(whole_frame=True)
             value += total
         count = max(len(self._active_views), 1) * len(self._sample_start)
         self._cache = (value / count, configuration.velocity_gradient(self._frame_ids, gradient_frames, count))
