@@ -340,6 +340,10 @@ def test_without_medial_axes_none_are_built_and_the_supports_are_those_computed_
         for view, mask, cap in zip(images.views, masks[frame], (4.0, 2.5), strict=True):
             if mask.any():
                 np.testing.assert_array_equal(view.support.values, support_from_mask(mask, cap).values)
+        uncapped = frame_images(Source(masks), cameras, [None, 2.5], None, frame)  # a view without a cap
+        if masks[frame][0].any():
+            np.testing.assert_array_equal(uncapped.views[0].support.values,
+                                          support_from_mask(masks[frame][0], None).values)
 
 
 def test_supports_without_medial_axes_sent_by_the_child_give_the_whole_frame_computed_alone(rig):

@@ -47,10 +47,10 @@ class FrameImages:
 
 
 def frame_images(source: Callable[[int], Sequence[np.ndarray]], cameras: Sequence[CameraLike],
-                 caps: Sequence[float], axis_scales: Sequence[float] | None, frame: int,
+                 caps: Sequence[float | None], axis_scales: Sequence[float] | None, frame: int,
                  target_boxes: np.ndarray | None = None) -> FrameImages:
     """Frame `frame`'s views from its silhouettes: per camera, the overlap criterion's support (its
-    inside cap from `caps` [px]) and, when `axis_scales` is given, the medial axis of the
+    inside cap from `caps` [px], None for none) and, when `axis_scales` is given, the medial axis of the
     silhouette-axis term (its robust scale [px]); both read one distance transform of the silhouette.
     `target_boxes` (F, V, 4): per frame and camera, pixels the support's window covers besides the
     silhouette (tracking.views.target_boxes).
@@ -73,8 +73,9 @@ def frame_images(source: Callable[[int], Sequence[np.ndarray]], cameras: Sequenc
             views.append(View(camera, SupportImage(np.zeros(scanned.mask.shape, np.float32), enabled=False)))
             axes.append(np.zeros((0, 2)))
             continue
-        # Without a medial axis only the capped support reads the inside distance.
-        inside = inside_distance(scanned.mask, scanned.box, None if axis_scales is not None else caps[index] + 0.5)
+        # Without a medial axis only the support reads the inside distance: up to its cap, if it has one.
+        limit = None if axis_scales is not None or caps[index] is None else caps[index] + 0.5
+        inside = inside_distance(scanned.mask, scanned.box, limit)
         around = None
         if target_boxes is not None:
             top, bottom, left, right = (int(value) for value in target_boxes[frame, index])
