@@ -74,13 +74,14 @@ def frame_images(source: Callable[[int], Sequence[np.ndarray]], cameras: Sequenc
             axes.append(np.zeros((0, 2)))
             continue
         # Without a medial axis only the support reads the inside distance: up to its cap, if it has one.
-        limit = None if axis_scales is not None or caps[index] is None else caps[index] + 0.5
+        cap = caps[index]
+        limit = None if axis_scales is not None or cap is None else cap + 0.5
         inside = inside_distance(scanned.mask, scanned.box, limit)
         around = None
         if target_boxes is not None:
             top, bottom, left, right = (int(value) for value in target_boxes[frame, index])
             around = (slice(top, bottom), slice(left, right))
-        views.append(View(camera, support_from_mask(scanned, inside_cap_px=caps[index], inside=inside,
+        views.append(View(camera, support_from_mask(scanned, inside_cap_px=cap, inside=inside,
                                                     also_around=around)))
         if axis_scales is not None:
             axes.append(medial_axis_pixels(scanned.mask, inside=inside))
