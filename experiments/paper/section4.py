@@ -281,7 +281,9 @@ def run_chain(
                 with warnings.catch_warnings():  # an empty view is simply skipped
                     warnings.simplefilter("ignore", EmptySilhouetteWarning)
                     image_task.set_views(images.get(frame).views)
-            if frame == 0:  # as `ibik track` does
+            # The first frame searched from several starts, as `ibik track` does; its image solves run
+            # their 100 steps here, where ibik track's stop at the criterion's peak (docs/method.md).
+            if frame == 0:
                 solve_first_frame(solver, configuration, levels, image_task, iterations=100, starts=8)
             else:
                 solver.solve(configuration, levels, iterations=iterations)
