@@ -117,9 +117,11 @@ class ImageTask(SegmentCriterion):
         self._active_views = [v for v in self.views if v.support.enabled]
         # What each view's support holds (its window until a sample falls outside), read once.
         self._held = [view.support.held_values() for view in self._active_views]
-        self._project = projector([view.camera for view in self._active_views])
-        self._pinholes = stacked_pinhole_parameters([view.camera for view in self._active_views])
-        self._pixels = pixel_projector([view.camera for view in self._active_views])
+        cameras = [view.camera for view in self._active_views]
+        # Pinhole cameras are projected inside the overlap kernel; any other camera projects itself.
+        self._pinholes = stacked_pinhole_parameters(cameras)
+        self._project = projector(cameras) if self._pinholes is None else None
+        self._pixels = pixel_projector(cameras)
         self.enabled = bool(self._active_views)
         self._cache_version = -1
 
@@ -136,7 +138,8 @@ class ImageTask(SegmentCriterion):
         # Pinhole cameras place, project and read the samples in one compiled call per view; any
         # other camera projects them itself first.
         pinholes = self._pinholes
-        projections = [] if pinholes is not None else self._project(self.sample_points(configuration))
+        projections = ([] if self._project is None else
+                       self._project(self.sample_points(configuration)))
         for index, view in enumerate(self._active_views):
             width, height = view.support.size
             for _ in range(2):  # the window around the body, unless a sample falls outside
