@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
@@ -10,6 +11,9 @@ from numba import njit
 
 from ibik_pin.checks import all_finite
 from ibik_pin.exceptions import InputError
+
+if TYPE_CHECKING:
+    from ibik_pin.limits import JointLimits
 
 _WORLD_ALIGNED = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 _KINEMATIC_STATES = itertools.count(1)  # one number per update, unique across all configurations
@@ -206,3 +210,19 @@ class Configuration:
     def integrate(self, dq: np.ndarray) -> np.ndarray:
         """q (+) dq on the configuration manifold (free-flyer quaternion included), shape (nq,)."""
         return pin.integrate(self.model, self.q, dq)
+
+    def move(self, dq: np.ndarray, limits: JointLimits | None = None) -> None:
+        """A solver's step: q becomes q (+) dq, clamped into the joint limits when given, and the
+        kinematics are updated (as update(q), without copying and checking the q made here).
+
+        Raises:
+            InputError: dq is not a finite (nv,) vector.
+        """
+        dq = np.asarray(dq, dtype=float)
+        if dq.shape != (self.model.nv,) or not all_finite(dq):
+            raise InputError(f"a step dq must be a finite vector of shape ({self.model.nv},), got shape {dq.shape}")
+        q = pin.integrate(self.model, self.q, dq)
+        if limits is not None:
+            limits.clamp(q, out=q)
+        self.q = q
+        self.update()

@@ -55,17 +55,19 @@ class JointLimits:
                      self.step, lower, upper)
         return lower, upper
 
-    def clamp(self, q: np.ndarray) -> np.ndarray:
-        """q with its limited coordinates clipped into [lower, upper], shape (nq,)."""
-        q = np.array(q, dtype=np.float64)
-        _clamp(q, self.q_index, self.lower, self.upper)
-        return q
+    def clamp(self, q: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """q with its limited coordinates clipped into [lower, upper], shape (nq,); written into
+        `out` (a contiguous float64 array of q's shape, q itself for in place) when given."""
+        if out is None:
+            out = np.array(q, dtype=np.float64)
+        elif out is not q:
+            out[:] = q
+        _clamp(out, self.q_index, self.lower, self.upper)
+        return out
 
     def violation(self, q: np.ndarray) -> float:
         """Largest distance [rad or m] by which q leaves its limits (0 inside)."""
-        q_limited = q[self.q_index]
-        return float(max(0.0, np.max(self.lower - q_limited, initial=0.0),
-                         np.max(q_limited - self.upper, initial=0.0)))
+        return float(_violation(np.ascontiguousarray(q, dtype=np.float64), self.q_index, self.lower, self.upper))
 
     def at_limit(self, q: np.ndarray, tolerance: float = 1e-6) -> list[str]:
         """Names of the joints within `tolerance` of a limit."""
@@ -74,7 +76,8 @@ class JointLimits:
         return [name for name, is_hit in zip(self.joint_names, hit, strict=True) if is_hit]
 
 
-# Compiled: both run at every solver step, where their dozen numpy calls cost more than the arithmetic.
+# Compiled: they run at every solver step or solve, where their dozen numpy calls cost more than
+# the arithmetic.
 @njit(cache=True, nogil=True)
 def _step_bounds(q, q_index, v_index, lower_limit, upper_limit, step, lower, upper):
     """lower, upper (nv,) of JointLimits.step_bounds, written in place."""
@@ -98,3 +101,13 @@ def _clamp(q, q_index, lower_limit, upper_limit):
     """q's limited coordinates clipped into their limits, in place."""
     for i in range(q_index.shape[0]):
         q[q_index[i]] = min(max(q[q_index[i]], lower_limit[i]), upper_limit[i])
+
+
+@njit(cache=True, nogil=True)
+def _violation(q, q_index, lower_limit, upper_limit):
+    """JointLimits.violation: the largest distance by which q's limited coordinates leave their limits."""
+    worst = 0.0
+    for i in range(q_index.shape[0]):
+        value = q[q_index[i]]
+        worst = max(worst, lower_limit[i] - value, value - upper_limit[i])
+    return worst

@@ -47,6 +47,34 @@ def test_a_non_finite_configuration_is_refused(human):
         Configuration(human.model, q)
 
 
+def test_a_move_is_the_integrated_step_clamped_into_the_limits_and_updated(human, rng):
+    """Configuration.move(dq, limits): the q of integrate + clamp + update, to the bit, with the
+    kinematics updated; a step of the wrong size or not finite is refused, q left as it was."""
+    from ibik_pin.limits import JointLimits
+
+    limits = JointLimits(human.model)
+    start = random_human_configuration(human, rng)
+    dq = rng.normal(0.0, 1.0, human.model.nv)  # large enough to leave some limits
+    for bound in (None, limits):
+        moved, updated = Configuration(human.model, start), Configuration(human.model, start)
+        version = moved.version
+        moved.move(dq, bound)
+        q = updated.integrate(dq)
+        updated.update(q if bound is None else bound.clamp(q))
+        np.testing.assert_array_equal(moved.q, updated.q)
+        assert moved.version != version
+        frame_ids = human.frame_ids(["LWrist", "RAnkle"])
+        np.testing.assert_array_equal(moved.frame_positions(frame_ids), updated.frame_positions(frame_ids))
+        np.testing.assert_array_equal(moved.frame_translation_jacobians(frame_ids),
+                                      updated.frame_translation_jacobians(frame_ids))
+    assert limits.violation(Configuration(human.model, start).integrate(dq)) > 0.1  # the clamp did work
+    configuration = Configuration(human.model, start)
+    for bad in (np.zeros(human.model.nv - 1), np.full(human.model.nv, np.nan)):
+        with pytest.raises(InputError, match="finite vector of shape"):
+            configuration.move(bad, limits)
+        np.testing.assert_array_equal(configuration.q, start)
+
+
 def test_frame_positions_follow_every_update_as_pinocchio_gives_them(human, rng):
     configuration = Configuration(human.model)
     data = human.model.createData()

@@ -40,6 +40,25 @@ def test_clamp_puts_every_coordinate_inside(human, rng):
     limits = JointLimits(human.model)
     q = pin.neutral(human.model)
     q[7:] = rng.uniform(-5, 5, 38)
+    clamped = limits.clamp(q)
+    assert limits.violation(clamped) == 0.0
+    assert limits.violation(q) > 0.0  # q itself untouched
+    into = np.empty_like(q)
+    assert limits.clamp(q, out=into) is into
+    np.testing.assert_array_equal(into, clamped)
+    assert limits.clamp(q, out=q) is q  # in place
+    np.testing.assert_array_equal(q, clamped)
+
+
+def test_violation_is_the_largest_distance_outside_the_limits(human, rng):
+    """The compiled violation equals a plain numpy reading of the limits, inside and outside."""
+    limits = JointLimits(human.model)
+    for _ in range(20):
+        q = pin.neutral(human.model)
+        q[7:] = rng.uniform(-3, 3, 38)
+        limited = q[limits.q_index]
+        expected = max(0.0, float(np.max(limits.lower - limited)), float(np.max(limited - limits.upper)))
+        assert limits.violation(q) == expected
     assert limits.violation(limits.clamp(q)) == 0.0
 
 

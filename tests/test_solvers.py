@@ -588,7 +588,7 @@ def test_a_solve_planned_once_equals_its_steps_planned_each_time(human, solver_n
         solver.step_adaptation.reset()
         for _ in range(6):
             step = solver.compute_step(stepped, levels)
-            stepped.update(limits.clamp(stepped.integrate(step.dq)))
+            stepped.update(limits.clamp(stepped.integrate(step.dq)))  # what Configuration.move does
         np.testing.assert_array_equal(solved.q, stepped.q)
         for task in levels[1]:
             task.set_target(task.target + rng.normal(0.0, 0.05, 3))
@@ -684,3 +684,42 @@ def test_a_plans_packed_levels_are_refilled_step_to_step_and_rebuilt_when_their_
     assert len(workspace._by_layout) <= 16
     assert workspace.identity(human.model.nv) is workspace.identity(human.model.nv)
     np.testing.assert_array_equal(workspace.identity(5), np.eye(5))
+
+
+def test_a_packing_holds_its_gradient_levels_adaptation_where_the_solver_reads_it(human, rng):
+    """PackedLevels keeps a gradient task's step adaptation in its own arrays (StepAdaptation.hold):
+    what the compiled loop adapts is the solver's state, read back without a copy; a second packing
+    of another layout takes the state over where the first left it, and the first takes it back;
+    after a reset every packing starts again from max_step_size."""
+    from ibik_pin.solvers.base import LevelPlan
+    from ibik_pin.solvers.kernels import HAS_PREVIOUS, STEP_SIZE
+    from ibik_pin.solvers.level_loop import PackedLevels
+
+    criterion = FrameHeight(human, "LElbow")
+    levels = human_levels(human, random_human_configuration(human, rng))
+    levels.insert(2, [criterion])
+    configuration = Configuration(human.model, random_human_configuration(human, rng))
+    adaptation = StepAdaptation()
+    nv = human.model.nv
+    built = build_levels(configuration, levels, LevelPlan.of(levels))
+    shorter = list(built)
+    shorter[0] = dataclasses.replace(built[0], A=built[0].A[:3], b=built[0].b[:3])
+    first = PackedLevels(built, adaptation, nv)
+    state, previous = adaptation.state(criterion, nv)
+    assert np.shares_memory(state, first.adaptation) and np.shares_memory(previous, first.previous)
+    direction = rng.normal(size=nv)
+    adaptation.adapt(criterion, direction)
+    adaptation.adapt(criterion, -direction)  # a reversal halves the step
+    assert first.adaptation[2, STEP_SIZE] == criterion.max_step_size / 2
+    second = PackedLevels(shorter, adaptation, nv)
+    np.testing.assert_array_equal(second.adaptation[2], first.adaptation[2])
+    np.testing.assert_array_equal(second.previous[2], -direction)
+    assert adaptation.step_size(criterion) == criterion.max_step_size / 2
+    adaptation.adapt(criterion, -direction)  # held by the second packing now: grows there
+    assert second.adaptation[2, STEP_SIZE] == pytest.approx(0.6 * criterion.max_step_size)
+    assert first.load(built)
+    np.testing.assert_array_equal(first.adaptation[2], second.adaptation[2])
+    adaptation.reset()
+    assert second.load(shorter)
+    assert second.adaptation[2, STEP_SIZE] == criterion.max_step_size and second.adaptation[2, HAS_PREVIOUS] == 0.0
+    np.testing.assert_array_equal(second.previous[2], np.zeros(nv))

@@ -76,12 +76,9 @@ def run_planar(
     solver.step_adaptation.reset()
     for _ in range(iterations):
         step = solver.compute_step(configuration, levels)
-        q = configuration.integrate(step.dq)
-        if solver.limits is not None:
-            q = solver.limits.clamp(q)
-        configuration.update(q)
-        trajectory.append(q.copy())
-        hits += segment_hits_object(scene, q)
+        configuration.move(step.dq, solver.limits)
+        trajectory.append(configuration.q.copy())
+        hits += segment_hits_object(scene, configuration.q)
     final = scene.keypoint_positions(configuration.q)
     return PlanarRun(
         trajectory=np.array(trajectory),

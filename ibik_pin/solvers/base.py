@@ -134,10 +134,12 @@ class LevelPlan:
     Attributes:
         levels: the levels planned (the scheme's arranged levels).
         entries: per level, None, a GradientTask, or a tuple of runs, each (tasks of one class, memo).
+        criterion_level: the first gradient level (None without one), whose h(q) a step reports.
     """
 
     levels: Levels
     entries: tuple
+    criterion_level: int | None = None
 
     @classmethod
     def of(cls, levels: Levels) -> LevelPlan:
@@ -161,7 +163,12 @@ class LevelPlan:
                 entries.append(tuple((list(run), {}) for _, run in itertools.groupby(tasks, key=type)))
             else:
                 entries.append(None)
-        return cls(levels, tuple(entries))
+        gradients = [index for index, entry in enumerate(entries) if isinstance(entry, GradientTask)]
+        return cls(levels, tuple(entries), gradients[0] if gradients else None)
+
+    def criterion(self, built: list) -> float:
+        """h(q) of the first gradient level of `built` (build_levels on this plan), NaN without one."""
+        return float("nan") if self.criterion_level is None else built[self.criterion_level].value
 
 
 def build_levels(configuration: Configuration, levels: Levels, plan: LevelPlan | None = None) -> list:
@@ -198,11 +205,6 @@ def build_levels(configuration: Configuration, levels: Levels, plan: LevelPlan |
                 )
             built.append(level_rows)
     return built
-
-
-def climbed_value(built: list) -> float:
-    """h(q) of the first gradient level of `built` (build_levels), NaN without one."""
-    return next((level.value for level in built if isinstance(level, GradientLevel)), float("nan"))
 
 
 def least_squares_status(residual: float, b: np.ndarray) -> str:
@@ -314,10 +316,7 @@ class Solver(ABC):
                     step = previous_step
                     break
                 previous_q, previous_value, previous_step = configuration.q.copy(), step.criterion, taken
-            q = configuration.integrate(step.dq)
-            if self.limits is not None:
-                q = self.limits.clamp(q)
-            configuration.update(q)
+            configuration.move(step.dq, self.limits)
             step_norms.append(vector_norm(step.dq))
             if tolerance is not None and step_norms[-1] < tolerance:
                 break

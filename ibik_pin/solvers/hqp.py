@@ -38,7 +38,6 @@ from ibik_pin.solvers.base import (
     Solver,
     StepResult,
     build_levels,
-    climbed_value,
     report_levels,
 )
 from ibik_pin.solvers.level_loop import StepWorkspace
@@ -102,14 +101,16 @@ class HierarchicalQPSolver(Solver):
         return qp, True
 
     def compute_step(self, configuration: Configuration, levels: Levels, plan: LevelPlan | None = None) -> StepResult:
-        built = build_levels(configuration, plan.levels if plan else self.arrange(levels), plan)
+        planned = plan or LevelPlan.of(self.arrange(levels))
+        built = build_levels(configuration, planned.levels, planned)
         nv = configuration.nv
         if self.limits is not None:
             lower, upper = self.limits.step_bounds(configuration.q)
         else:
             lower, upper = np.full(nv, -UNBOUNDED), np.full(nv, UNBOUNDED)
         packed = self._workspace.packed(built, plan, self.step_adaptation, nv)
-        dq, null_basis = np.minimum(np.maximum(0.0, lower), upper), self._workspace.identity(nv)
+        # From no step, clipped into the bounds (a q outside its limits steps back in first).
+        dq, null_basis = self._workspace.zeros(nv), self._workspace.identity(nv)
         failed: set[int] = set()
         start = 0
         while start < len(built):
@@ -129,7 +130,7 @@ class HierarchicalQPSolver(Solver):
                     null_basis = null_basis @ remaining
             start = stopped + 1
         packed.finish()
-        return StepResult(dq, functools.partial(report_levels, built, dq.copy(), failed), climbed_value(built))
+        return StepResult(dq, functools.partial(report_levels, built, dq.copy(), failed), planned.criterion(built))
 
     def _solve_level(self, index, hessian, linear, constraint, lower, upper) -> np.ndarray | None:
         """proxsuite solve of min 1/2 w'Hw + g'w s.t. lower <= C w <= upper; None if it failed.

@@ -1,7 +1,8 @@
 """The solvers' compiled code (Numba): the level loop and everything it calls.
 
 - :func:`solve_levels`: the levels of the projection stack and the hierarchical QP, highest first,
-  each in the null space of those above it (:mod:`ibik_pin.solvers.level_loop` packs them);
+  each in the null space of those above it (:mod:`ibik_pin.solvers.level_loop` packs them), and
+  :func:`solve_levels_step`, its step alone;
 - :func:`factor`, :func:`damped_solve`, :func:`damped_step`, :func:`coordinate_solve`,
   :func:`complement`: a level's damped least squares and the null space it leaves
   (:mod:`ibik_pin.solvers.nullspace`);
@@ -431,7 +432,8 @@ def solve_levels(kinds, rows, targets, row_starts, adaptation, previous, steps, 
         steps: (L,) the step norm of each gradient level this step, 0 until it is taken; a level
             whose norm is already set (a second pass of the same step) keeps it.
         dq: (nv,) the higher levels' step; null_basis: (nv, r) Z, C-contiguous.
-        lower, upper: (nv,) bounds on dq, used when `bounded` (then dq is clipped into them).
+        lower, upper: (nv,) bounds on dq, used when `bounded` (then dq is clipped into them, the
+            given dq first).
         active_set: solve a level that the bounds reach by the active-set method (else hand it back).
         damping: lambda of every level's damped least squares.
         feasibility: see primal_active_set.
@@ -448,6 +450,8 @@ def solve_levels(kinds, rows, targets, row_starts, adaptation, previous, steps, 
         if kinds[index] != EMPTY:
             last = index
     nothing_2d, nothing_1d = np.zeros((0, 0)), np.zeros(0)
+    if bounded:
+        dq = np.minimum(np.maximum(dq, lower), upper)
     for index in range(start, levels):
         size = null_basis.shape[1]
         if kinds[index] == EMPTY or size == 0:
@@ -504,3 +508,16 @@ def solve_levels(kinds, rows, targets, row_starts, adaptation, previous, steps, 
         else:
             null_basis = null_basis @ remaining
     return dq, null_basis, levels, nothing_2d, nothing_1d, nothing_2d, True
+
+
+@njit(cache=True, nogil=True)
+def solve_levels_step(kinds, rows, targets, row_starts, adaptation, previous, steps, dq, null_basis, lower, upper,
+                      bounded, active_set, damping, feasibility, start):
+    """solve_levels' dq, the level handed back and success, without the arrays of a level handed
+    back: what a step reads when every level is done (as almost always). Returning those unused
+    arrays to Python cost 1.6 us a call; a caller that gets a level back calls solve_levels again
+    with the same arguments (a level's step norm, once set in `steps`, is kept, so the second call
+    repeats the first)."""
+    result = solve_levels(kinds, rows, targets, row_starts, adaptation, previous, steps, dq, null_basis, lower,
+                          upper, bounded, active_set, damping, feasibility, start)
+    return result[0], result[2], result[6]

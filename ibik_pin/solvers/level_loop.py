@@ -16,12 +16,11 @@ import numpy as np
 
 from ibik_pin.exceptions import SolverError
 from ibik_pin.solvers.base import GradientLevel, LeastSquaresLevel
-from ibik_pin.solvers.kernels import EMPTY, GRADIENT, LEAST_SQUARES, solve_levels
+from ibik_pin.solvers.kernels import EMPTY, GRADIENT, LEAST_SQUARES, solve_levels, solve_levels_step
 from ibik_pin.solvers.step_adaptation import StepAdaptation
 
 __all__ = ["PackedLevels", "StepWorkspace"]
 
-_NO_TARGET = np.zeros(1)  # a gradient level's (unused) target
 _KEPT_LAYOUTS = 16  # layouts kept at most (a stack that keeps changing shape starts afresh)
 
 
@@ -34,9 +33,13 @@ def layout_of(built: list) -> tuple:
 class PackedLevels:
     """Built levels (solvers.base.build_levels) as the arrays `solve_levels` reads.
 
+    The gradient levels' step-adaptation state lives in `adaptation` and `previous` while the
+    packing is in use: its StepAdaptation holds it there (StepAdaptation.hold), so the compiled loop
+    updates the source's state in place.
+
     Attributes:
         kinds, rows, targets, row_starts: the levels (see solve_levels).
-        adaptation, previous: the gradient levels' step-adaptation state, copied from `source`.
+        adaptation, previous: the gradient levels' step-adaptation state (StepAdaptation.state).
         steps: (L,) the gradient levels' step norms of this step, 0 until taken.
     """
 
@@ -52,61 +55,68 @@ class PackedLevels:
         self.steps = np.zeros(len(built))
         self.rows = np.zeros((int(self.row_starts[-1]), nv))
         self.targets = np.zeros(int(self.row_starts[-1]))
+        # Per level, the views its rows are written to at every step (a slice assignment each, where
+        # a concatenation of all levels cost twice as much), and a gradient level's state rows.
+        self._row_views = [self.rows[a:b] for a, b in zip(self.row_starts[:-1], self.row_starts[1:], strict=True)]
+        self._target_views = [self.targets[a:b] for a, b in zip(self.row_starts[:-1], self.row_starts[1:], strict=True)]
+        self._state_rows = [(self.adaptation[index], self.previous[index]) for index in range(len(built))]
         self.load(built)
 
     def load(self, built: list) -> bool:
         """Take the rows of newly built levels (the next step of the same plan) into the arrays.
 
         Returns:
-            False, with nothing changed, when their layout is not this one's (a rebuild is needed).
+            False when their layout is not this one's (a rebuild is needed); the rows may then be
+            partly overwritten (the next load rewrites them all).
         """
         if len(built) != len(self._layout):
             return False
-        blocks, targets = [], []
-        for (kind, count), level in zip(self._layout, built, strict=True):
+        for index, ((kind, count), level) in enumerate(zip(self._layout, built, strict=True)):
             if kind == LEAST_SQUARES:
-                if not isinstance(level, LeastSquaresLevel) or level.A.shape[0] != count:
+                if type(level) is not LeastSquaresLevel or level.A.shape[0] != count:
                     return False
-                blocks.append(level.A)
-                targets.append(level.b)
+                self._row_views[index][:] = level.A
+                self._target_views[index][:] = level.b
             elif kind == GRADIENT:
-                if not isinstance(level, GradientLevel):
+                if type(level) is not GradientLevel:
                     return False
-                blocks.append(level.direction[None])
-                targets.append(_NO_TARGET)
+                self._row_views[index][0] = level.direction
             elif level is not None:
                 return False
-        if blocks:  # one copy of every level's rows into the arrays the compiled loop reads
-            np.concatenate(blocks, axis=0, out=self.rows)
-            np.concatenate(targets, out=self.targets)
-        nv = self.previous.shape[1]
         for index in self._gradient_levels:
-            self.adaptation[index], self.previous[index] = self.source.state(built[index].task, nv)
+            state, previous = self._state_rows[index]
+            task = built[index].task
+            if self.source.state(task, previous.size)[0] is not state:  # held elsewhere, or reset
+                self.source.hold(task, state, previous)
         self.steps.fill(0.0)
         self.built = built
         return True
 
     def solve(self, dq: np.ndarray, null_basis: np.ndarray, lower: np.ndarray, upper: np.ndarray, *,
               bounded: bool, active_set: bool, damping: float, feasibility: float = 0.0, start: int = 0):
-        """solve_levels on these levels; raises SolverError if a factorisation failed."""
-        dq, null_basis, stopped, hessian, linear, remaining, ok = solve_levels(
-            self.kinds, self.rows, self.targets, self.row_starts, self.adaptation, self.previous, self.steps,
-            np.ascontiguousarray(dq, dtype=np.float64), np.ascontiguousarray(null_basis, dtype=np.float64),
-            lower, upper, bounded, active_set, damping, feasibility, start)
+        """solve_levels on these levels; raises SolverError if a factorisation failed.
+
+        Returns:
+            dq, null_basis, the level handed back (L when every level is done) and, for that level,
+            its QP's Hessian, linear term and the null space it leaves (None when every level is done).
+        """
+        arguments = (self.kinds, self.rows, self.targets, self.row_starts, self.adaptation, self.previous,
+                     self.steps, np.ascontiguousarray(dq, dtype=np.float64),
+                     np.ascontiguousarray(null_basis, dtype=np.float64), lower, upper, bounded, active_set,
+                     damping, feasibility, start)
+        dq, stopped, ok = solve_levels_step(*arguments)
         if not ok:
             raise SolverError(f"the factors of level {stopped}'s projected Jacobian failed "
                               "(a non-finite matrix?)")
+        if stopped == self.kinds.shape[0]:
+            return dq, None, stopped, None, None, None
+        dq, null_basis, stopped, hessian, linear, remaining, _ = solve_levels(*arguments)
         return dq, null_basis, stopped, hessian, linear, remaining
 
     def finish(self) -> None:
-        """Write the gradient levels' adaptation back to their StepAdaptation, and their step norms
-        to the built levels (for the reports)."""
-        nv = self.previous.shape[1]
+        """Write the gradient levels' step norms to the built levels (for the reports)."""
         for index in self._gradient_levels:
-            level = self.built[index]
-            state, previous = self.source.state(level.task, nv)
-            state[:], previous[:] = self.adaptation[index], self.previous[index]
-            level.step_size = float(self.steps[index])
+            self.built[index].step_size = float(self.steps[index])
 
 
 class StepWorkspace:
@@ -117,19 +127,36 @@ class StepWorkspace:
     def __init__(self) -> None:
         self._by_layout: dict[tuple, PackedLevels] = {}
         self._identities: dict[int, np.ndarray] = {}
+        self._zeros: dict[int, np.ndarray] = {}
+        self._last: tuple[object, PackedLevels] | None = None  # the last plan and its packing
 
     def packed(self, built: list, plan: object, source: StepAdaptation, nv: int) -> PackedLevels:
         """`built` packed: in the arrays kept for its layout (the previous step of its solve, or an
         earlier solve of the same shape), else in new ones, kept (a step without a plan keeps none)."""
+        if plan is not None and self._last is not None and self._last[0] is plan:
+            last = self._last[1]  # the step before's, whose layout the next step almost always has
+            if last.source is source and last.previous.shape[1] == nv and last.load(built):
+                return last
         layout = layout_of(built)
-        packed = self._by_layout.get(layout)
-        if packed is None or packed.source is not source or packed.previous.shape[1] != nv or not packed.load(built):
+        kept = self._by_layout.get(layout)
+        if kept is not None and kept.source is source and kept.previous.shape[1] == nv and kept.load(built):
+            packed = kept
+        else:
             packed = PackedLevels(built, source, nv)
             if plan is not None:
                 if len(self._by_layout) >= _KEPT_LAYOUTS:
                     self._by_layout.clear()
                 self._by_layout[layout] = packed
+        if plan is not None:
+            self._last = (plan, packed)
         return packed
+
+    def zeros(self, nv: int) -> np.ndarray:
+        """(nv,) zeros, shared: the level loop only reads it."""
+        zeros = self._zeros.get(nv)
+        if zeros is None:
+            zeros = self._zeros[nv] = np.zeros(nv)
+        return zeros
 
     def identity(self, nv: int) -> np.ndarray:
         """The (nv, nv) identity, shared: the level loop only reads it."""

@@ -29,7 +29,6 @@ from ibik_pin.solvers.base import (
     Solver,
     StepResult,
     build_levels,
-    climbed_value,
     report_levels,
 )
 from ibik_pin.solvers.level_loop import PackedLevels, StepWorkspace
@@ -48,7 +47,8 @@ class PriorityStackSolver(Solver):
         self._workspace = StepWorkspace()
 
     def compute_step(self, configuration: Configuration, levels: Levels, plan: LevelPlan | None = None) -> StepResult:
-        built = build_levels(configuration, plan.levels if plan else self.arrange(levels), plan)
+        planned = plan or LevelPlan.of(self.arrange(levels))
+        built = build_levels(configuration, planned.levels, planned)
         nv = configuration.nv
         packed = self._workspace.packed(built, plan, self.step_adaptation, nv)
         if self.limits is None:
@@ -69,7 +69,7 @@ class PriorityStackSolver(Solver):
                 locked |= leaving
             dq = np.clip(dq, lower, upper)
         packed.finish()
-        return StepResult(dq, functools.partial(report_levels, built, dq.copy()), climbed_value(built))
+        return StepResult(dq, functools.partial(report_levels, built, dq.copy()), planned.criterion(built))
 
     def _project(self, packed: PackedLevels, dq: np.ndarray, null_basis: np.ndarray) -> np.ndarray:
         """The recursive stack from a partial step dq over the coordinates spanned by null_basis."""

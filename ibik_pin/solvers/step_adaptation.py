@@ -42,6 +42,14 @@ class StepAdaptation:
             self._steps[id(task)] = entry
         return entry[1], entry[2]
 
+    def hold(self, task: GradientTask, state: np.ndarray, previous: np.ndarray) -> None:
+        """Keep the task's state in these arrays (its row (4,) and previous direction (nv,)) from now
+        on, its current state copied in: the level loop's packed arrays, which the compiled loop then
+        updates in place, with nothing copied back and forth at every step."""
+        current_state, current_previous = self.state(task, previous.size)
+        state[:], previous[:] = current_state, current_previous
+        self._steps[id(task)] = (task, state, previous)
+
     def step_size(self, task: GradientTask) -> float:
         """The task's current step norm [rad, or the units of v]: max_step_size before its first step."""
         entry = self._steps.get(id(task))

@@ -106,6 +106,6 @@ class GradientTask(ABC):
         """Unit ascent direction gradient / |gradient|, shape (nv,) (zeros if it vanishes)."""
         gradient = self.compute_gradient(configuration)
         norm = math.sqrt(gradient @ gradient)  # np.linalg.norm's value, without its wrapper
-        if norm == 0.0 or not np.isfinite(norm):
+        if norm == 0.0 or not math.isfinite(norm):
             return np.zeros_like(gradient)
         return gradient / norm

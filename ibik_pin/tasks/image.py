@@ -97,6 +97,7 @@ class ImageTask(SegmentCriterion):
         self._sample_start, self._sample_end = np.repeat(starts, n), np.repeat(ends, n)
         self._sample_fraction = np.tile(s, len(segments))
         self._changing: dict[bytes, np.ndarray] = {}  # values_at's changing samples per moved rows
+        self._gradient_frames = np.zeros((len(self._frame_ids), 3))  # _evaluate's, kept between steps
         self.segments = segments
         self.views: list[View] = []
         self.set_views(views)
@@ -115,8 +116,11 @@ class ImageTask(SegmentCriterion):
                     stacklevel=2,
                 )
         self._active_views = [v for v in self.views if v.support.enabled]
-        # What each view's support holds (its window until a sample falls outside), read once.
+        # What each view's support holds (its window until a sample falls outside), and its size,
+        # read once; the samples a value averages over.
         self._held = [view.support.held_values() for view in self._active_views]
+        self._sizes = [tuple(view.support.size) for view in self._active_views]
+        self._count = max(len(self._active_views), 1) * len(self._sample_start)
         cameras = [view.camera for view in self._active_views]
         # Pinhole cameras are projected inside the overlap kernel; any other camera projects itself.
         self._pinholes = stacked_pinhole_parameters(cameras)
@@ -134,14 +138,14 @@ class ImageTask(SegmentCriterion):
             return self._cache
         positions, _ = configuration.frame_arrays(self._frame_ids)
         value = 0.0
-        gradient_frames = np.zeros((len(self._frame_ids), 3))  # dh/dX of each end frame, (K, 3)
+        gradient_frames = self._gradient_frames  # dh/dX of each end frame, (K, 3), summed into
+        gradient_frames.fill(0.0)
         # Pinhole cameras place, project and read the samples in one compiled call per view; any
         # other camera projects them itself first.
         pinholes = self._pinholes
         projections = ([] if self._project is None else
                        self._project(self.sample_points(configuration)))
-        for index, view in enumerate(self._active_views):
-            width, height = view.support.size
+        for index, (view, (width, height)) in enumerate(zip(self._active_views, self._sizes, strict=True)):
             for _ in range(2):  # the window around the body, unless a sample falls outside
                 values, row, column = self._held[index]
                 if pinholes is not None:
@@ -156,7 +160,7 @@ class ImageTask(SegmentCriterion):
                     break
                 self._held[index] = view.support.held_values(whole_frame=True)
             value += total
-        count = max(len(self._active_views), 1) * len(self._sample_start)
+        count = self._count
         self._cache = (value / count, configuration.velocity_gradient(self._frame_ids, gradient_frames, count))
         self._cache_version = configuration.version
         return self._cache
