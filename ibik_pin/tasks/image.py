@@ -14,10 +14,11 @@ interpolant that reads I_c.
 
 from __future__ import annotations
 
+import itertools
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import cast
+from typing import NamedTuple, cast
 
 import numpy as np
 
@@ -59,6 +60,20 @@ class View:
             )
 
 
+class _MoveLayout(NamedTuple):
+    """ImageTask.values_at_moves' arrays for one set of moves (rows and candidate counts)."""
+
+    candidates: np.ndarray  # (moves,) candidates of each move
+    bounds: np.ndarray  # (moves + 1,) where each move's candidates start
+    changing: np.ndarray  # (moves, M) bool, the samples each move changes
+    unchanged: np.ndarray  # its negation
+    placed_rows: np.ndarray  # (moves,) the end each move places
+    point_count: int  # changing samples over every candidate
+    starts: np.ndarray  # where each candidate with changing samples starts among the points
+    filled: np.ndarray  # (P,) bool, the candidates with changing samples
+    slices: list  # each move's (start, stop) among the candidates
+
+
 class ImageTask(SegmentCriterion):
     """Maximise the overlap h(q) of the projected skeleton segments with the views' supports.
 
@@ -97,6 +112,7 @@ class ImageTask(SegmentCriterion):
         self._sample_start, self._sample_end = np.repeat(starts, n), np.repeat(ends, n)
         self._sample_fraction = np.tile(s, len(segments))
         self._changing: dict[bytes, np.ndarray] = {}  # values_at's changing samples per moved rows
+        self._move_layouts: dict[tuple, _MoveLayout] = {}  # values_at_moves' per set of moves
         self._gradient_frames = np.zeros((len(self._frame_ids), 3))  # _evaluate's, kept between steps
         self.segments = segments
         self.views: list[View] = []
@@ -202,24 +218,39 @@ class ImageTask(SegmentCriterion):
         known = cast(list, pose)
         samples = self._interpolation.shape[0]
         placed = np.concatenate([np.asarray(points, dtype=float).reshape(-1, 3) for _, points in moves])
-        candidates = np.array([len(points) for _, points in moves])
-        bounds = np.concatenate([[0], np.cumsum(candidates)]).astype(np.int64)
-        changing = np.array([self._changing_samples(rows) for rows, _ in moves])  # (moves, M)
-        per_candidate = changing.sum(axis=1)  # changing samples of each move's candidates
-        points = np.empty((int(candidates @ per_candidate), 3))
+        layout = self._move_layout(moves)
+        points = np.empty((layout.point_count, 3))
         positions = np.ascontiguousarray(positions, dtype=float)
-        moved_samples(self._interpolation @ positions, self._interpolation, changing,
-                      np.array([rows[0] for rows, _ in moves], dtype=np.int64), bounds, placed, positions, points)
-        # Each candidate's changing samples are consecutive: summed by one reduceat per view.
-        starts = np.repeat(np.concatenate([[0], np.cumsum(candidates * per_candidate)[:-1]]), candidates) \
-            + np.concatenate([np.arange(count) * size for count, size in zip(candidates, per_candidate, strict=True)])
-        filled = np.repeat(per_candidate, candidates) > 0  # (reduceat reads an empty group as one value)
+        moved_samples(self._interpolation @ positions, self._interpolation, layout.changing, layout.placed_rows,
+                      layout.bounds, placed, positions, points)
         totals = np.zeros(len(placed))
         for view, at_pose, projected in zip(self._active_views, known, self._pixels(points), strict=True):
-            totals += np.repeat((~changing) @ at_pose[0], candidates)  # each move's unchanged samples
+            totals += np.repeat(layout.unchanged @ at_pose[0], layout.candidates)  # each move's unchanged samples
             if points.size:
-                totals[filled] += np.add.reduceat(support_at(view, points, projected=projected), starts[filled])
-        return np.split(totals / (samples * max(len(self._active_views), 1)), bounds[1:-1])
+                totals[layout.filled] += np.add.reduceat(support_at(view, points, projected=projected), layout.starts)
+        totals /= samples * max(len(self._active_views), 1)
+        return [totals[start:stop] for start, stop in layout.slices]
+
+    def _move_layout(self, moves: Sequence[tuple[np.ndarray, np.ndarray]]) -> _MoveLayout:
+        """What values_at_moves reads of the moves' rows and candidate counts alone, kept per such
+        set (the swivel search asks the same limbs with the same candidate count every frame)."""
+        key = tuple((np.asarray(rows).tobytes(), len(points)) for rows, points in moves)
+        layout = self._move_layouts.get(key)
+        if layout is None:
+            candidates = np.array([len(points) for _, points in moves])
+            bounds = np.concatenate([[0], np.cumsum(candidates)]).astype(np.int64)
+            changing = np.array([self._changing_samples(rows) for rows, _ in moves])  # (moves, M)
+            per_candidate = changing.sum(axis=1)  # changing samples of each move's candidates
+            # Each candidate's changing samples are consecutive: summed by one reduceat per view.
+            starts = np.repeat(np.concatenate([[0], np.cumsum(candidates * per_candidate)[:-1]]), candidates) \
+                + np.concatenate([np.arange(count) * size
+                                  for count, size in zip(candidates, per_candidate, strict=True)])
+            filled = np.repeat(per_candidate, candidates) > 0  # (reduceat reads an empty group as one value)
+            layout = self._move_layouts[key] = _MoveLayout(
+                candidates, bounds, changing, ~changing, np.array([rows[0] for rows, _ in moves], dtype=np.int64),
+                int(candidates @ per_candidate), starts[filled], filled,
+                list(itertools.pairwise(bounds.tolist())))
+        return layout
 
     def _changing_samples(self, moved: np.ndarray) -> np.ndarray:
         """(M,) bool: the samples on a segment that a `moved` row ends (kept per set of rows)."""

@@ -25,6 +25,7 @@ translation Jacobians of the segment's end frames and dpi/dX the projection Jaco
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import cast
@@ -97,6 +98,7 @@ class SilhouetteAxisTask(SegmentCriterion):
         )
         self.views: list[AxisView] = []
         self._changing: dict[bytes | None, tuple[np.ndarray, np.ndarray]] = {}
+        self._move_layouts: dict[tuple, tuple] = {}  # values_at_moves' arrays per set of moves
         self.set_views(views)
 
     def set_views(self, views: Sequence[AxisView]) -> None:
@@ -160,9 +162,16 @@ class SilhouetteAxisTask(SegmentCriterion):
             return super().values_at_moves(positions, pose, moves)
         known = cast(list, pose)
         placed = np.concatenate([np.asarray(points, dtype=float).reshape(-1, 3) for _, points in moves])
-        bounds = np.cumsum([0] + [len(points) for _, points in moves]).astype(np.int64)
-        placed_rows = np.array([rows[0] for rows, _ in moves], dtype=np.int64)
-        changing = np.array([self._changing_mask(rows) for rows, _ in moves])
+        # The moves' rows and candidate counts, kept per such set (the same limbs every frame).
+        key = tuple((np.asarray(rows).tobytes(), len(points)) for rows, points in moves)
+        kept = self._move_layouts.get(key)
+        if kept is None:
+            bounds = np.cumsum([0] + [len(points) for _, points in moves]).astype(np.int64)
+            kept = self._move_layouts[key] = (
+                bounds, np.array([rows[0] for rows, _ in moves], dtype=np.int64),
+                np.array([self._changing_mask(rows) for rows, _ in moves]),
+                list(itertools.pairwise(bounds.tolist())))
+        bounds, placed_rows, changing, slices = kept
         values, counts = np.zeros(len(placed)), np.zeros(len(placed))
         view_values, visible = np.empty(len(placed)), np.empty(len(placed), dtype=bool)
         for view, (pose_pixels, pose_in_front, distances), (pixels, depth) in zip(
@@ -172,7 +181,8 @@ class SilhouetteAxisTask(SegmentCriterion):
                               view_values, visible)
             values += np.where(visible, view_values, 0.0)
             counts += visible
-        return np.split(values / np.maximum(counts, 1), bounds[1:-1])
+        values /= np.maximum(counts, 1)
+        return [values[start:stop] for start, stop in slices]
 
     def _placed_values(self, placed: list[tuple[np.ndarray, np.ndarray]], candidates: int,
                        moved: np.ndarray | None, known: list | None) -> np.ndarray:
