@@ -237,6 +237,8 @@ class ImageTask(SegmentCriterion):
         key = tuple((np.asarray(rows).tobytes(), len(points)) for rows, points in moves)
         layout = self._move_layouts.get(key)
         if layout is None:
+            if len(self._move_layouts) >= 64:  # (a caller whose moves keep changing starts afresh)
+                self._move_layouts.clear()
             candidates = np.array([len(points) for _, points in moves])
             bounds = np.concatenate([[0], np.cumsum(candidates)]).astype(np.int64)
             changing = np.array([self._changing_samples(rows) for rows, _ in moves])  # (moves, M)

@@ -166,6 +166,8 @@ class SilhouetteAxisTask(SegmentCriterion):
         key = tuple((np.asarray(rows).tobytes(), len(points)) for rows, points in moves)
         kept = self._move_layouts.get(key)
         if kept is None:
+            if len(self._move_layouts) >= 64:  # (a caller whose moves keep changing starts afresh)
+                self._move_layouts.clear()
             bounds = np.cumsum([0] + [len(points) for _, points in moves]).astype(np.int64)
             kept = self._move_layouts[key] = (
                 bounds, np.array([rows[0] for rows, _ in moves], dtype=np.int64),
