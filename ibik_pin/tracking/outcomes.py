@@ -81,9 +81,10 @@ def _weighted_rows(tasks: Sequence, configuration: Configuration) -> tuple[np.nd
     return (jacobians[0] if len(jacobians) == 1 else np.vstack(jacobians)), np.concatenate(errors)
 
 
-def _outcome(tasks: Sequence, configuration: Configuration, null_basis: np.ndarray, status: str,
+def _outcome(tasks: Sequence, configuration: Configuration, null_basis: np.ndarray | None, status: str,
              rows: tuple[np.ndarray, np.ndarray]) -> LevelOutcome:
-    """One stack level's outcome; `rows`: its _weighted_rows."""
+    """One stack level's outcome; `rows`: its _weighted_rows; `null_basis`: what the levels above
+    leave free, None when no level above has taken anything (the whole space)."""
     images = [task.criterion if isinstance(task, CriterionStepTask) else task for task in tasks
               if isinstance(task, (GradientTask, CriterionStepTask))]
     if images:
@@ -91,7 +92,7 @@ def _outcome(tasks: Sequence, configuration: Configuration, null_basis: np.ndarr
         if not image.enabled:
             return LevelOutcome(status, float("nan"), float("nan"), float("nan"))
         direction = image.compute_direction(configuration)
-        free = float(np.linalg.norm(null_basis.T @ direction))
+        free = float(np.linalg.norm(direction if null_basis is None else null_basis.T @ direction))
         sacrificed = 1.0 - free if np.linalg.norm(direction) > 0.0 else float("nan")
         return LevelOutcome(status, float("nan"), float(np.clip(sacrificed, 0.0, 1.0)),
                             image.compute_value(configuration))
@@ -100,6 +101,8 @@ def _outcome(tasks: Sequence, configuration: Configuration, null_basis: np.ndarr
         return LevelOutcome(status, float("nan"), float("nan"), float("nan"))
     residual = float(np.linalg.norm(error))  # sqrt(sum w |e|^2)
     if residual <= NEGLIGIBLE_ERROR:
+        return LevelOutcome(status, residual, 0.0, float("nan"))
+    if null_basis is None:  # no level above: nothing taken (the same two residuals, 0 exactly)
         return LevelOutcome(status, residual, 0.0, float("nan"))
     lost = _unexplained(A @ null_basis, error) - _unexplained(A, error)
     return LevelOutcome(status, residual, float(np.clip(lost, 0.0, residual)), float("nan"))
@@ -119,6 +122,7 @@ def level_outcomes(plan: StackPlan, configuration: Configuration, statuses: Sequ
     """
     outcomes: list[LevelOutcome | None] = [None] * len(plan.names)
     null_basis = np.eye(configuration.nv)
+    whole_space = True  # null_basis is still the identity: no level above has taken anything
     last = len(plan.solver_levels) - 1
     for solver_level, tasks in enumerate(plan.solver_levels):
         level_rows = None  # a strict level's rows, which its null space reads too
@@ -128,7 +132,8 @@ def level_outcomes(plan: StackPlan, configuration: Configuration, statuses: Sequ
             at = report_index[index]
             status = statuses[at] if at is not None and at < len(statuses) else "empty"
             rows = _weighted_rows(plan.level_tasks[index], configuration)
-            outcomes[index] = _outcome(plan.level_tasks[index], configuration, null_basis, status, rows)
+            outcomes[index] = _outcome(plan.level_tasks[index], configuration, None if whole_space else null_basis,
+                                       status, rows)
             level_rows = rows if list(plan.level_tasks[index]) == list(tasks) else None
         # The freedom this solver level uses up, as the solvers remove it (none below the last).
         if null_basis.shape[1] == 0 or solver_level == last:
@@ -137,7 +142,7 @@ def level_outcomes(plan: StackPlan, configuration: Configuration, statuses: Sequ
         if len(enabled) == 1 and isinstance(enabled[0], GradientTask):
             reduced = null_basis.T @ enabled[0].compute_direction(configuration)
             if np.linalg.norm(reduced) > RANK_TOLERANCE:
-                null_basis = null_basis @ remove_direction(reduced)
+                null_basis, whole_space = null_basis @ remove_direction(reduced), False
         elif enabled:
             if level_rows is not None and not any(isinstance(task, CriterionStepTask) for task in enabled):
                 A = level_rows[0]  # the same rows: sqrt(w) J of each enabled task, in order
@@ -145,5 +150,5 @@ def level_outcomes(plan: StackPlan, configuration: Configuration, statuses: Sequ
                 A = np.vstack([task.compute_linear_system(configuration)[0] for task in enabled
                                if isinstance(task, Task)])
             _, remaining = damped_solve(A @ null_basis, np.zeros(A.shape[0]), damping)
-            null_basis = null_basis @ remaining
+            null_basis, whole_space = null_basis @ remaining, False
     return [outcome for outcome in outcomes if outcome is not None]
