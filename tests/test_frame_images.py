@@ -63,6 +63,9 @@ class Source:
     def add_records(self, start, records) -> None:
         self.read[start:start + len(records)] = records
 
+    def read_elsewhere(self, frame: int) -> None:
+        self.read.append((frame, -1, "elsewhere"))
+
 
 def prepare(source, cameras, frame):
     return frame_images(source, cameras, [4.0, 4.0], [6.0, 6.0], frame)
@@ -401,3 +404,52 @@ def test_frame_images_cover_the_target_boxes_with_the_whole_frames_values(rig):
     assert row <= 2 and column <= 3 and row + held.shape[0] >= 30 and column + held.shape[1] >= 40
     plain = frame_images(Source(masks), cameras, [4.0, 4.0], None, 0)
     np.testing.assert_array_equal(images.views[0].support.values, plain.views[0].support.values)
+
+
+def test_a_parent_waiting_on_a_slower_child_prepares_frames_the_child_has_not_reached(rig):
+    """A child slower than the parent (one large view on the paper's arm): while it would wait, the
+    parent claims and prepares frames beyond the child's reach (its slots ahead), which the child then
+    skips. Every frame is still the one prepared in turn, read once, in the process that claimed
+    it; a claimed frame's job stays with the parent (the child has not its images); the silhouette
+    figures of every frame end up in the parent's reader, none read again for the report."""
+    import time
+
+    from ibik_pin.tracking.image_process import MAX_SLOTS
+    from ibik_pin.tracking.video_inputs import SilhouetteQualityReader
+
+    cameras, masks = rig
+    frames = MAX_SLOTS + 16
+    masks = [masks[frame % FRAMES] for frame in range(frames)]
+    parent = os.getpid()
+    # Per frame, how often it was read and by which process, shared with the child.
+    read_count, reader_pid = multiprocessing.Array("i", frames), multiprocessing.Array("i", frames)
+
+    def masks_of_frame(frame):
+        read_count[frame] += 1
+        reader_pid[frame] = os.getpid()
+        if os.getpid() != parent and frame < MAX_SLOTS // 2:
+            time.sleep(0.01)  # the child's first frames are slow ones; then it gets ahead
+        return masks[frame]
+
+    targets = np.zeros((frames, 1, 3))  # the body's origin, inside the silhouettes
+    reader = SilhouetteQualityReader(masks_of_frame, cameras, targets)
+    offloaded = []
+    with FrameImagesAhead(lambda frame: prepare(reader, cameras, frame), frames, "process", reader,
+                          job=_job) as images:
+        for frame in range(frames):
+            ahead = images.get(frame)
+            in_turn = prepare(masks.__getitem__, cameras, frame)
+            for view, reference in zip(ahead.views, in_turn.views, strict=True):
+                np.testing.assert_array_equal(view.support.held_values()[0], reference.support.held_values()[0])
+            time.sleep(0.002)  # the solve
+            if images.offload(frame, None):
+                offloaded.append(frame)
+        images.finish_jobs()
+    claimed = [frame for frame in range(1, frames) if reader_pid[frame] == parent]
+    assert claimed and min(claimed) > MAX_SLOTS  # beyond what the child may have started
+    assert list(read_count) == [1] * frames  # each frame read once
+    assert offloaded and not set(offloaded) & set(claimed)
+    in_turn = SilhouetteQualityReader(masks.__getitem__, cameras, targets)
+    assert reader.quality("masks") == in_turn.quality("masks")
+    assert list(read_count) == [1] * frames  # every frame's figures came with its images
+    assert not _children()

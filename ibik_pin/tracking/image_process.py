@@ -17,6 +17,13 @@ pose (on the paper's arm, about 45 frames in the search's 55 ms; frames/s over t
 the first went 668 -> 847 against 4 slots, means of nine runs each). Per-frame figures the source
 keeps (the silhouette quality report's) come back with each frame.
 
+A child slower than the parent (one view on the paper's arm: 1.1 ms to build a frame's support
+against 0.65 ms to solve it, measured over 600 frames) would keep the parent waiting. So the parent,
+when no frame is ready, claims the first frame the child cannot have started yet (beyond its slots,
+flagged in a shared byte per frame) and prepares it itself; the child skips it. On the arm about a
+fifth of the frames were claimed and the frames after the first went from 1.1 to 0.87-0.89 ms
+(600 frames). The silhouettes must then be readable in any order (mask files, decoded videos).
+
 The child also runs jobs the parent sends (`submit`): a job reads a frame's images and whatever
 the child's copy of the parent's objects holds. The tracker sends it a frame's level outcomes
 (tracking.outcomes), about 0.7 ms of work that needs the frame's solution but nothing of the next
@@ -43,6 +50,7 @@ from collections.abc import Callable
 from typing import Protocol, runtime_checkable
 
 import cv2
+import numpy as np
 
 from ibik_pin.exceptions import IbikError
 from ibik_pin.tracking.frame_slots import FrameSlots, pack_frame, slot_bytes_for, unpack_frame
@@ -83,14 +91,20 @@ class FrameRecords(Protocol):
         ...
 
     def add_records(self, start: int, records: object) -> None:
-        """Take the figures of frames from `start` on, as `records` gave them."""
+        """Take the figures of frames from `start` on, as `records` gave them (a frame that process
+        did not read keeps the figures read here)."""
+        ...
+
+    def read_elsewhere(self, frame: int) -> None:
+        """Frame `frame` is read by the other process, which keeps its figures: count it as recorded."""
         ...
 
 
 def _child(prepare: Callable, frame_count: int, connection, slots: FrameSlots, records: FrameRecords | None,
-           job: Callable | None, first) -> None:
-    """The child's loop: frames 1 .. frame_count - 1, each into a free slot, and the jobs the parent
-    sends, until the parent closes its end; an error is sent at its frame and ends the loop."""
+           job: Callable | None, first, claimed) -> None:
+    """The child's loop: frames 1 .. frame_count - 1 but those the parent has claimed (`claimed`, a
+    shared byte per frame), each into a free slot, and the jobs the parent sends, until the parent
+    closes its end; an error is sent at its frame and ends the loop."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle; it ends the child
     signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not the parent's handler (the CLI's raises an error)
     # OpenCV's thread pool does not survive a fork (its calls can hang in the child: opencv#5150,
@@ -123,6 +137,10 @@ def _child(prepare: Callable, frame_count: int, connection, slots: FrameSlots, r
 
     sent = records.recorded_frames() if records is not None else 0
     for frame in range(1, frame_count):
+        if claimed[frame]:  # the parent prepares it (ImageProcess._claim)
+            if records is not None:
+                records.read_elsewhere(frame)
+            continue
         try:
             images = prepare(frame)
         except BaseException as error:  # every failure goes to the parent, at its frame
@@ -187,6 +205,9 @@ class ImageProcess:
         self._connection: multiprocessing.connection.Connection | None = None
         self._memory: mmap.mmap | None = None
         self._slots: FrameSlots | None = None
+        self._claimed: np.ndarray | None = None  # per frame, 1 once the parent has claimed it
+        self._own: dict[int, object] = {}  # the frames claimed and prepared here, until asked for
+        self._last_claim = 0
 
     def get(self, frame: int):
         if frame != self._next:
@@ -198,20 +219,45 @@ class ImageProcess:
             if self._frame_count > 1:
                 self._start(first)
             return first
+        if frame in self._own:
+            return self._own.pop(frame)
+        # Rather than wait for a child that falls behind, prepare a frame it cannot have started.
+        while not self._waiting and self._connection is not None and not self._connection.poll() and self._claim(frame):
+            pass
         return self._receive(frame)
+
+    def _claim(self, frame: int) -> bool:
+        """Claim and prepare here the first frame the child cannot have started, while the parent
+        waits for `frame`; False when none is left (or enough are held here already).
+
+        The child holds at most `count` frames in slots (frame - HELD on: the parent has handed back
+        the earlier ones) and prepares one more; the frames claimed and not yet asked for are all
+        beyond `frame` and take no slot. So the child has started nothing past frame + count +
+        len(own) - HELD. The claim is written before the parent hands back another slot (a pipe
+        write), which the child must read before it gets that far: it then finds the frame claimed.
+        """
+        assert self._claimed is not None and self._slots is not None
+        claim = max(frame + self._slots.count + len(self._own) + 1, self._last_claim + 1)
+        if claim >= self._frame_count or len(self._own) >= self._slots.count:
+            return False
+        self._claimed[claim] = 1
+        self._last_claim = claim
+        self._own[claim] = self._prepare(claim)
+        return True
 
     def _start(self, first) -> None:
         slot_bytes = slot_bytes_for(first)
         count = min(max(SLOT_BUDGET_BYTES // slot_bytes, MIN_SLOTS), MAX_SLOTS, self._frame_count + HELD)
-        self._memory = mmap.mmap(-1, count * slot_bytes)  # anonymous and shared: the child writes into it
+        self._memory = mmap.mmap(-1, count * slot_bytes + self._frame_count)  # anonymous and shared
         self._slots = FrameSlots(self._memory, slot_bytes, count)
+        self._claimed = np.frombuffer(self._memory, np.uint8, self._frame_count, count * slot_bytes)
         context = multiprocessing.get_context("fork")
         self._connection, child_end = context.Pipe(duplex=True)
         for stream in (sys.stdout, sys.stderr):  # nothing buffered to be written twice by the child
             stream.flush()
         self._process = context.Process(target=_child, name="ibik-frame-images", daemon=True,
                                         args=(self._prepare, self._frame_count, child_end, self._slots,
-                                              self._records, self._job, first))
+                                              self._records, self._job, first, self._claimed))
         self._process.start()
         child_end.close()
 
@@ -282,6 +328,8 @@ class ImageProcess:
         a job, or once the child has ended."""
         if self._job is None or self._connection is None or self._process is None:
             return False
+        if self._claimed is not None and self._claimed[frame]:  # prepared here: the child lacks its images
+            return False
         try:
             self._connection.send(("job", frame, payload))
         except OSError:
@@ -316,6 +364,8 @@ class ImageProcess:
         if self._connection is not None:
             self._connection.close()
             self._connection = None
+        self._claimed = None
+        self._own.clear()
         if self._memory is not None:
             with contextlib.suppress(BufferError):  # an array still views it: the mapping goes with it
                 self._memory.close()

@@ -333,6 +333,7 @@ class SilhouetteQualityReader:
         self._inside = np.full((len(targets_m), len(self._cameras)), np.nan)
         self._areas = np.zeros((len(targets_m), len(self._cameras)), dtype=int)
         self._read = np.zeros(len(targets_m), dtype=bool)
+        self._read_elsewhere = np.zeros(len(targets_m), dtype=bool)  # by the other process, figures there
 
     def __call__(self, frame: int) -> list[np.ndarray]:
         """Frame `frame`'s masks, one per camera."""
@@ -349,8 +350,8 @@ class SilhouetteQualityReader:
 
     # Its figures, for a reader in another process (tracking.image_process.FrameRecords).
     def recorded_frames(self) -> int:
-        """How many frames, from frame 0 on, have been read (their figures kept)."""
-        unread = np.flatnonzero(~self._read)
+        """How many frames, from frame 0 on, have been read (their figures kept), here or elsewhere."""
+        unread = np.flatnonzero(~(self._read | self._read_elsewhere))
         return int(unread[0]) if unread.size else len(self._read)
 
     def records(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -358,8 +359,11 @@ class SilhouetteQualityReader:
 
     def add_records(self, start: int, records: object) -> None:
         inside, areas, read = cast(tuple[np.ndarray, np.ndarray, np.ndarray], records)
-        stop = start + len(read)
-        self._inside[start:stop], self._areas[start:stop], self._read[start:stop] = inside, areas, read
+        taken = start + np.flatnonzero(read)  # a frame the other process did not read keeps its figures here
+        self._inside[taken], self._areas[taken], self._read[taken] = inside[read], areas[read], True
+
+    def read_elsewhere(self, frame: int) -> None:
+        self._read_elsewhere[frame] = True
 
     def quality(self, segmenter: str) -> SilhouetteQuality:
         """SilhouetteQuality over every frame (those not read yet are read now)."""
