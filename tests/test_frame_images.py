@@ -453,3 +453,39 @@ def test_a_parent_waiting_on_a_slower_child_prepares_frames_the_child_has_not_re
     assert reader.quality("masks") == in_turn.quality("masks")
     assert list(read_count) == [1] * frames  # every frame's figures came with its images
     assert not _children()
+
+
+def test_a_frame_the_parent_claimed_fails_at_its_own_frame(rig):
+    """The parent prepares a frame it claims well before the frame is asked for; a failure there is
+    raised when that frame is asked, as the child's are, after every frame before it."""
+    import time
+
+    from ibik_pin.tracking.image_process import MAX_SLOTS
+
+    cameras, masks = rig
+    frames = MAX_SLOTS + 8
+    failing = MAX_SLOTS + 2  # the first frame the parent claims (the child slow from the start)
+    parent = os.getpid()
+    failed_in = multiprocessing.Value("i", 0)  # the process that read the failing frame
+
+    def masks_of_frame(frame):
+        if os.getpid() != parent:
+            time.sleep(0.01)
+        if frame == failing:
+            failed_in.value = os.getpid()
+            raise InputError(f"frame {frame}: the mask cannot be read")
+        return masks[frame % FRAMES]
+
+    got = []
+
+    def track_frames():
+        with FrameImagesAhead(lambda frame: prepare(masks_of_frame, cameras, frame), frames, "process") as images:
+            for frame in range(frames):
+                images.get(frame)
+                got.append(frame)
+
+    with pytest.raises(InputError, match=f"frame {failing}: the mask cannot be read"):
+        track_frames()
+    assert got == list(range(failing))
+    assert failed_in.value == parent  # claimed: read here, long before its frame
+    assert not _children()

@@ -206,7 +206,7 @@ class ImageProcess:
         self._memory: mmap.mmap | None = None
         self._slots: FrameSlots | None = None
         self._claimed: np.ndarray | None = None  # per frame, 1 once the parent has claimed it
-        self._own: dict[int, object] = {}  # the frames claimed and prepared here, until asked for
+        self._own: dict[int, object] = {}  # the frames claimed and prepared here (or their errors), until asked for
         self._last_claim = 0
 
     def get(self, frame: int):
@@ -220,7 +220,10 @@ class ImageProcess:
                 self._start(first)
             return first
         if frame in self._own:
-            return self._own.pop(frame)
+            images = self._own.pop(frame)
+            if isinstance(images, Exception):  # a claimed frame's failure, raised at its frame
+                raise images
+            return images
         # Rather than wait for a child that falls behind, prepare a frame it cannot have started.
         while not self._waiting and self._connection is not None and not self._connection.poll() and self._claim(frame):
             pass
@@ -242,7 +245,10 @@ class ImageProcess:
             return False
         self._claimed[claim] = 1
         self._last_claim = claim
-        self._own[claim] = self._prepare(claim)
+        try:
+            self._own[claim] = self._prepare(claim)
+        except Exception as error:  # raised when the frame is asked for, as the child's errors are
+            self._own[claim] = error
         return True
 
     def _start(self, first) -> None:
