@@ -233,11 +233,12 @@ class ImageProcess:
         """Claim and prepare here the first frame the child cannot have started, while the parent
         waits for `frame`; False when none is left (or enough are held here already).
 
-        The child holds at most `count` frames in slots (frame - HELD on: the parent has handed back
-        the earlier ones) and prepares one more; the frames claimed and not yet asked for are all
-        beyond `frame` and take no slot. So the child has started nothing past frame + count +
-        len(own) - HELD. The claim is written before the parent hands back another slot (a pipe
-        write), which the child must read before it gets that far: it then finds the frame claimed.
+        The child holds at most `count` frames in slots, from frame - HELD on (the parent has handed
+        back the earlier ones' slots), and prepares one more; claimed frames take no slot: those
+        not yet asked for (all beyond `frame`) and at most HELD among the last asked. So the child
+        has started nothing past frame + count + len(own). The claim is written before the parent
+        hands back another slot (a pipe write), which the child must read before it gets further:
+        it then finds the frame claimed.
         """
         assert self._claimed is not None and self._slots is not None
         claim = max(frame + self._slots.count + len(self._own) + 1, self._last_claim + 1)
