@@ -219,8 +219,10 @@ class Configuration:
             InputError: dq is not a finite (nv,) vector.
         """
         dq = np.asarray(dq, dtype=float)
-        if dq.shape != (self.model.nv,) or not all_finite(dq):
+        if dq.shape != (self.model.nv,):
             raise InputError(f"a step dq must be a finite vector of shape ({self.model.nv},), got shape {dq.shape}")
+        if not all_finite(dq):
+            raise InputError("a step dq must be a finite vector, got NaN or infinity")
         q = pin.integrate(self.model, self.q, dq)
         if limits is not None:
             limits.clamp(q, out=q)

@@ -69,8 +69,9 @@ def test_a_move_is_the_integrated_step_clamped_into_the_limits_and_updated(human
                                       updated.frame_translation_jacobians(frame_ids))
     assert limits.violation(Configuration(human.model, start).integrate(dq)) > 0.1  # the clamp did work
     configuration = Configuration(human.model, start)
-    for bad in (np.zeros(human.model.nv - 1), np.full(human.model.nv, np.nan)):
-        with pytest.raises(InputError, match="finite vector of shape"):
+    for bad, message in ((np.zeros(human.model.nv - 1), r"of shape \(44,\), got shape \(43,\)"),
+                         (np.full(human.model.nv, np.nan), "NaN or infinity")):
+        with pytest.raises(InputError, match=message):
             configuration.move(bad, limits)
         np.testing.assert_array_equal(configuration.q, start)
 
