@@ -418,7 +418,7 @@ def test_a_parent_waiting_on_a_slower_child_prepares_frames_the_child_has_not_re
     from ibik_pin.tracking.video_inputs import SilhouetteQualityReader
 
     cameras, masks = rig
-    frames = MAX_SLOTS + 16
+    frames = 3 * MAX_SLOTS  # the child, once fast, gets past frames it has skipped: its jobs still find their images
     masks = [masks[frame % FRAMES] for frame in range(frames)]
     parent = os.getpid()
     # Per frame, how often it was read and by which process, shared with the child.
@@ -433,7 +433,7 @@ def test_a_parent_waiting_on_a_slower_child_prepares_frames_the_child_has_not_re
 
     targets = np.zeros((frames, 1, 3))  # the body's origin, inside the silhouettes
     reader = SilhouetteQualityReader(masks_of_frame, cameras, targets)
-    offloaded = []
+    offloaded, results = [], {}
     with FrameImagesAhead(lambda frame: prepare(reader, cameras, frame), frames, "process", reader,
                           job=_job) as images:
         for frame in range(frames):
@@ -441,14 +441,19 @@ def test_a_parent_waiting_on_a_slower_child_prepares_frames_the_child_has_not_re
             in_turn = prepare(masks.__getitem__, cameras, frame)
             for view, reference in zip(ahead.views, in_turn.views, strict=True):
                 np.testing.assert_array_equal(view.support.held_values()[0], reference.support.held_values()[0])
-            time.sleep(0.002)  # the solve
+            # The solve; one long one once the child is fast, which it spends getting far ahead.
+            time.sleep(0.05 if frame == MAX_SLOTS else 0.002)
             if images.offload(frame, None):
                 offloaded.append(frame)
-        images.finish_jobs()
+            results.update(images.results())
+        results.update(images.finish_jobs())
     claimed = [frame for frame in range(1, frames) if reader_pid[frame] == parent]
     assert claimed and min(claimed) > MAX_SLOTS  # beyond what the child may have started
     assert list(read_count) == [1] * frames  # each frame read once
     assert offloaded and not set(offloaded) & set(claimed)
+    assert sorted(results) == offloaded
+    for frame in offloaded:  # each job on its frame's images, also past frames the child skipped
+        assert results[frame][3] == (["side"] if frame % FRAMES == 2 else [])
     in_turn = SilhouetteQualityReader(masks.__getitem__, cameras, targets)
     assert reader.quality("masks") == in_turn.quality("masks")
     assert list(read_count) == [1] * frames  # every frame's figures came with its images

@@ -113,9 +113,10 @@ def _child(prepare: Callable, frame_count: int, connection, slots: FrameSlots, r
     warnings.simplefilter("ignore")  # the parent reports what matters; the child writes nothing
     free = list(range(slots.count))
     # The images of the last frames prepared, for the jobs. A job comes for the frame the parent has
-    # just solved, t: the parent then holds the slots of t - 1 and t, so the child has sent
-    # t + count - 2 at most and prepared one more; jobs come in order, so the frames up to a job's
-    # are dropped with it.
+    # just solved, t: the parent then holds the slots of t - 1 and t, so the child has sent at most
+    # count frames of its own from t - 1 on (the frames the parent claimed take none, and are not
+    # prepared here) and prepared one more: t is among the last count + 2 it prepared. Jobs come in
+    # order, so the frames up to a job's are dropped with it.
     kept = {0: first} if job is not None else {}
     kept_for_jobs = slots.count + 2
 
@@ -148,7 +149,8 @@ def _child(prepare: Callable, frame_count: int, connection, slots: FrameSlots, r
             return
         if job is not None:
             kept[frame] = images
-            kept.pop(frame - kept_for_jobs, None)
+            if len(kept) > kept_for_jobs:  # counted, not by frame number: claimed frames are skipped
+                del kept[min(kept)]
         while not free:
             if not handle(connection.recv()):
                 return
