@@ -260,3 +260,54 @@ def test_the_first_frames_blind_solve_stops_once_converged(human, rng):
     solver.solve(full, levels, iterations=100)
     keypoints = human.frame_ids(list(human.keypoints))
     np.testing.assert_allclose(early.frame_positions(keypoints), full.frame_positions(keypoints), atol=1e-6)
+
+
+def test_a_slow_image_process_and_its_claimed_frames_give_the_motion_and_outcomes_of_one_thread(human, monkeypatch):
+    """The tracker beside a child held up at one frame (so the parent, waiting for it, claims later
+    frames and builds them itself) and then running past the claimed frames, every frame's level
+    outcomes handed to the child where it can take them: the motion, the overlaps and the level
+    outcomes of a run on one thread, to the bit."""
+    import multiprocessing
+    import os
+    import time
+
+    from ibik_pin.tracking.image_process import MAX_SLOTS, ImageProcess
+
+    frames = 2 * MAX_SLOTS + 8
+    rng = np.random.default_rng(5)
+    start = random_human_configuration(human, rng, spread=0.3)
+    end = random_human_configuration(human, rng, spread=0.3)
+    end[:7] = start[:7]
+    motion = np.array([pin.interpolate(human.model, start, end, t) for t in np.linspace(0.0, 0.3, frames)])
+    frame_ids = human.frame_ids(TARGETS)
+    targets = np.array([Configuration(human.model, q).frame_positions(frame_ids) for q in motion])
+    cameras, masks = _two_views(human, motion)
+    parent = os.getpid()
+    read_in_parent = multiprocessing.Array("i", frames)
+    solved = multiprocessing.Value("i", 0)  # frames the parent has solved
+
+    def silhouettes(frame):
+        if os.getpid() == parent:
+            read_in_parent[frame] = 1
+        elif frame == MAX_SLOTS:  # the child held up until the parent waits for this frame
+            while solved.value < MAX_SLOTS:
+                time.sleep(0.001)
+            time.sleep(0.05)
+        return masks[frame]
+
+    def progress():
+        solved.value += 1
+
+    settings = fast_settings(iterations=3, first_frame_iterations=10)
+    monkeypatch.setattr(ImageProcess, "child_is_ahead", lambda self: True)  # every job offered to the child
+    in_process = Tracker(human, cameras, dataclasses.replace(settings, read_ahead="process")).track(
+        TARGETS, targets, silhouettes=silhouettes, progress=progress)
+    here = Tracker(human, cameras, dataclasses.replace(settings, read_ahead="off")).track(
+        TARGETS, targets, silhouettes=lambda frame: masks[frame])
+    assert sum(read_in_parent[1:]) > 0  # frames claimed
+    np.testing.assert_array_equal(in_process.q, here.q)
+    np.testing.assert_array_equal(in_process.overlap, here.overlap)
+    for process_frame, frame in zip(in_process.level_outcomes, here.level_outcomes, strict=True):
+        assert [outcome.status for outcome in process_frame] == [outcome.status for outcome in frame]
+        np.testing.assert_array_equal([[o.residual, o.sacrificed, o.criterion] for o in process_frame],
+                                      [[o.residual, o.sacrificed, o.criterion] for o in frame])
