@@ -469,13 +469,15 @@ def test_a_frame_the_parent_claimed_fails_at_its_own_frame(rig):
 
     cameras, masks = rig
     frames = MAX_SLOTS + 8
-    failing = MAX_SLOTS + 2  # the first frame the parent claims (the child slow from the start)
+    failing = MAX_SLOTS + 2  # the first frame the parent claims, waiting for frame 1
     parent = os.getpid()
     failed_in = multiprocessing.Value("i", 0)  # the process that read the failing frame
 
     def masks_of_frame(frame):
-        if os.getpid() != parent:
-            time.sleep(0.01)
+        if os.getpid() != parent and frame == 1:  # the child held up until the parent has claimed
+            deadline = time.monotonic() + 10.0
+            while failed_in.value == 0 and time.monotonic() < deadline:
+                time.sleep(0.001)
         if frame == failing:
             failed_in.value = os.getpid()
             raise InputError(f"frame {frame}: the mask cannot be read")

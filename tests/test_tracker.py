@@ -284,24 +284,20 @@ def test_a_slow_image_process_and_its_claimed_frames_give_the_motion_and_outcome
     cameras, masks = _two_views(human, motion)
     parent = os.getpid()
     read_in_parent = multiprocessing.Array("i", frames)
-    solved = multiprocessing.Value("i", 0)  # frames the parent has solved
 
     def silhouettes(frame):
         if os.getpid() == parent:
             read_in_parent[frame] = 1
-        elif frame == MAX_SLOTS:  # the child held up until the parent waits for this frame
-            while solved.value < MAX_SLOTS:
+        elif frame == MAX_SLOTS:  # the child held up until the parent, waiting for it, has claimed a frame
+            deadline = time.monotonic() + 10.0
+            while not any(read_in_parent[1:]) and time.monotonic() < deadline:
                 time.sleep(0.001)
-            time.sleep(0.05)
         return masks[frame]
-
-    def progress():
-        solved.value += 1
 
     settings = fast_settings(iterations=3, first_frame_iterations=10)
     monkeypatch.setattr(ImageProcess, "child_is_ahead", lambda self: True)  # every job offered to the child
     in_process = Tracker(human, cameras, dataclasses.replace(settings, read_ahead="process")).track(
-        TARGETS, targets, silhouettes=silhouettes, progress=progress)
+        TARGETS, targets, silhouettes=silhouettes)
     here = Tracker(human, cameras, dataclasses.replace(settings, read_ahead="off")).track(
         TARGETS, targets, silhouettes=lambda frame: masks[frame])
     assert sum(read_in_parent[1:]) > 0  # frames claimed

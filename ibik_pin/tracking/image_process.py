@@ -226,9 +226,12 @@ class ImageProcess:
             if isinstance(images, Exception):  # a claimed frame's failure, raised at its frame
                 raise images
             return images
-        # Rather than wait for a child that falls behind, prepare a frame it cannot have started.
-        while not self._waiting and self._connection is not None and not self._connection.poll() and self._claim(frame):
-            pass
+        # Rather than wait for a child that falls behind, prepare a frame it cannot have started (job
+        # results that have arrived are no frame: they are read aside first).
+        while self._connection is not None:
+            self._read_arrived()
+            if self._waiting or not self._claim(frame):
+                break
         return self._receive(frame)
 
     def _claim(self, frame: int) -> bool:
@@ -323,14 +326,20 @@ class ImageProcess:
         better do the work itself; a lead spent on jobs is thus never spent below AHEAD frames."""
         if self._connection is None:
             return False
+        self._read_arrived()
+        return sum(message[0] == "frame" for message in self._waiting) >= AHEAD
+
+    def _read_arrived(self) -> None:
+        """Read the child's messages that have arrived: job results taken aside, frames and errors
+        kept in order for _next_message."""
+        assert self._connection is not None
         with contextlib.suppress(EOFError, OSError):  # a child that ended is found out at the next frame
             while self._connection.poll():
                 message = self._connection.recv()
                 if message[0] == "result":
                     self._take_result(message)
-                else:  # frames and errors, in order, for _next_message
+                else:
                     self._waiting.append(message)
-        return sum(message[0] == "frame" for message in self._waiting) >= AHEAD
 
     def submit(self, frame: int, payload: object) -> bool:
         """Send `job(frame, images, payload)` to the child; False (nothing sent) without a child or
