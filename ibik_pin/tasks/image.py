@@ -112,7 +112,6 @@ class ImageTask(SegmentCriterion):
         self._sample_start, self._sample_end = np.repeat(starts, n), np.repeat(ends, n)
         self._sample_fraction = np.tile(s, len(segments))
         self._changing: dict[bytes, np.ndarray] = {}  # values_at's changing samples per moved rows
-        self._move_layouts: dict[tuple, _MoveLayout] = {}  # values_at_moves' per set of moves
         self._gradient_frames = np.zeros((len(self._frame_ids), 3))  # _evaluate's, kept between steps
         self.segments = segments
         self.views: list[View] = []
@@ -218,7 +217,7 @@ class ImageTask(SegmentCriterion):
         known = cast(list, pose)
         samples = self._interpolation.shape[0]
         placed = np.concatenate([np.asarray(points, dtype=float).reshape(-1, 3) for _, points in moves])
-        layout = self._move_layout(moves)
+        layout = self._kept_for_moves(moves, self._move_layout)
         points = np.empty((layout.point_count, 3))
         positions = np.ascontiguousarray(positions, dtype=float)
         moved_samples(self._interpolation @ positions, self._interpolation, layout.changing, layout.placed_rows,
@@ -232,27 +231,18 @@ class ImageTask(SegmentCriterion):
         return [totals[start:stop] for start, stop in layout.slices]
 
     def _move_layout(self, moves: Sequence[tuple[np.ndarray, np.ndarray]]) -> _MoveLayout:
-        """What values_at_moves reads of the moves' rows and candidate counts alone, kept per such
-        set (the swivel search asks the same limbs with the same candidate count every frame)."""
-        key = tuple((np.asarray(rows).tobytes(), len(points)) for rows, points in moves)
-        layout = self._move_layouts.get(key)
-        if layout is None:
-            if len(self._move_layouts) >= 64:  # (a caller whose moves keep changing starts afresh)
-                self._move_layouts.clear()
-            candidates = np.array([len(points) for _, points in moves])
-            bounds = np.concatenate([[0], np.cumsum(candidates)]).astype(np.int64)
-            changing = np.array([self._changing_samples(rows) for rows, _ in moves])  # (moves, M)
-            per_candidate = changing.sum(axis=1)  # changing samples of each move's candidates
-            # Each candidate's changing samples are consecutive: summed by one reduceat per view.
-            starts = np.repeat(np.concatenate([[0], np.cumsum(candidates * per_candidate)[:-1]]), candidates) \
-                + np.concatenate([np.arange(count) * size
-                                  for count, size in zip(candidates, per_candidate, strict=True)])
-            filled = np.repeat(per_candidate, candidates) > 0  # (reduceat reads an empty group as one value)
-            layout = self._move_layouts[key] = _MoveLayout(
-                candidates, bounds, changing, ~changing, np.array([rows[0] for rows, _ in moves], dtype=np.int64),
-                int(candidates @ per_candidate), starts[filled], filled,
-                list(itertools.pairwise(bounds.tolist())))
-        return layout
+        """values_at_moves' arrays for these moves (built once per set: SegmentCriterion._kept_for_moves)."""
+        candidates = np.array([len(points) for _, points in moves])
+        bounds = np.concatenate([[0], np.cumsum(candidates)]).astype(np.int64)
+        changing = np.array([self._changing_samples(rows) for rows, _ in moves])  # (moves, M)
+        per_candidate = changing.sum(axis=1)  # changing samples of each move's candidates
+        # Each candidate's changing samples are consecutive: summed by one reduceat per view.
+        starts = np.repeat(np.concatenate([[0], np.cumsum(candidates * per_candidate)[:-1]]), candidates) \
+            + np.concatenate([np.arange(count) * size for count, size in zip(candidates, per_candidate, strict=True)])
+        filled = np.repeat(per_candidate, candidates) > 0  # (reduceat reads an empty group as one value)
+        return _MoveLayout(candidates, bounds, changing, ~changing,
+                           np.array([rows[0] for rows, _ in moves], dtype=np.int64), int(candidates @ per_candidate),
+                           starts[filled], filled, list(itertools.pairwise(bounds.tolist())))
 
     def _changing_samples(self, moved: np.ndarray) -> np.ndarray:
         """(M,) bool: the samples on a segment that a `moved` row ends (kept per set of rows)."""

@@ -10,8 +10,8 @@ once per step even where segments share a joint), and the swivel search
 from __future__ import annotations
 
 from abc import abstractmethod
-from collections.abc import Sequence
-from typing import NamedTuple
+from collections.abc import Callable, Sequence
+from typing import NamedTuple, TypeVar
 
 import numpy as np
 
@@ -20,6 +20,10 @@ from ibik_pin.model import BodyModel
 from ibik_pin.tasks.base import GradientTask
 
 __all__ = ["SegmentCriterion", "SegmentEnds", "segment_ends"]
+
+Moves = Sequence[tuple[np.ndarray, np.ndarray]]  # per move: the rows it places, and their candidates (C, 3)
+Layout = TypeVar("Layout")
+_KEPT_MOVE_LAYOUTS = 64  # sets of moves kept at most (a caller whose moves keep changing starts afresh)
 
 
 class SegmentEnds(NamedTuple):
@@ -65,6 +69,21 @@ class SegmentCriterion(GradientTask):
     """
 
     _frame_ids: np.ndarray
+
+    def __init__(self, max_step_size: float = 0.05, min_step_size: float = 1e-4) -> None:
+        super().__init__(max_step_size, min_step_size)
+        self._move_layouts: dict[tuple, object] = {}
+
+    def _kept_for_moves(self, moves: Moves, build: Callable[[Moves], Layout]) -> Layout:
+        """build(moves): what values_at_moves reads of the moves' rows and candidate counts alone,
+        kept per such set (the swivel search asks the same limbs with as many candidates every frame)."""
+        key = tuple((np.asarray(rows).tobytes(), len(points)) for rows, points in moves)
+        layout = self._move_layouts.get(key)
+        if layout is None:
+            if len(self._move_layouts) >= _KEPT_MOVE_LAYOUTS:
+                self._move_layouts.clear()
+            layout = self._move_layouts[key] = build(moves)
+        return layout  # type: ignore[return-value]
 
     @property
     def frame_ids(self) -> np.ndarray:

@@ -98,7 +98,6 @@ class SilhouetteAxisTask(SegmentCriterion):
         )
         self.views: list[AxisView] = []
         self._changing: dict[bytes | None, tuple[np.ndarray, np.ndarray]] = {}
-        self._move_layouts: dict[tuple, tuple] = {}  # values_at_moves' arrays per set of moves
         self.set_views(views)
 
     def set_views(self, views: Sequence[AxisView]) -> None:
@@ -162,18 +161,7 @@ class SilhouetteAxisTask(SegmentCriterion):
             return super().values_at_moves(positions, pose, moves)
         known = cast(list, pose)
         placed = np.concatenate([np.asarray(points, dtype=float).reshape(-1, 3) for _, points in moves])
-        # The moves' rows and candidate counts, kept per such set (the same limbs every frame).
-        key = tuple((np.asarray(rows).tobytes(), len(points)) for rows, points in moves)
-        kept = self._move_layouts.get(key)
-        if kept is None:
-            if len(self._move_layouts) >= 64:  # (a caller whose moves keep changing starts afresh)
-                self._move_layouts.clear()
-            bounds = np.cumsum([0] + [len(points) for _, points in moves]).astype(np.int64)
-            kept = self._move_layouts[key] = (
-                bounds, np.array([rows[0] for rows, _ in moves], dtype=np.int64),
-                np.array([self._changing_mask(rows) for rows, _ in moves]),
-                list(itertools.pairwise(bounds.tolist())))
-        bounds, placed_rows, changing, slices = kept
+        bounds, placed_rows, changing, slices = self._kept_for_moves(moves, self._move_layout)
         values, counts = np.zeros(len(placed)), np.zeros(len(placed))
         view_values, visible = np.empty(len(placed)), np.empty(len(placed), dtype=bool)
         for view, (pose_pixels, pose_in_front, distances), (pixels, depth) in zip(
@@ -185,6 +173,14 @@ class SilhouetteAxisTask(SegmentCriterion):
             counts += visible
         values /= np.maximum(counts, 1)
         return [values[start:stop] for start, stop in slices]
+
+    def _move_layout(self, moves: Sequence[tuple[np.ndarray, np.ndarray]]) -> tuple:
+        """values_at_moves' arrays for these moves (built once per set: SegmentCriterion._kept_for_moves):
+        where each move's candidates start, the row each places, the segments each changes, and
+        each move's (start, stop) among the candidates."""
+        bounds = np.cumsum([0] + [len(points) for _, points in moves]).astype(np.int64)
+        return (bounds, np.array([rows[0] for rows, _ in moves], dtype=np.int64),
+                np.array([self._changing_mask(rows) for rows, _ in moves]), list(itertools.pairwise(bounds.tolist())))
 
     def _placed_values(self, placed: list[tuple[np.ndarray, np.ndarray]], candidates: int,
                        moved: np.ndarray | None, known: list | None) -> np.ndarray:
