@@ -22,6 +22,10 @@ Measures in one run:
   function), and
   the process's peak memory.
 
+Every frames/s figure is the median of --rounds rounds, which take the settings in turn (every
+round's figure is in the JSON as `<figure>_rounds`): a single run on this shared machine can fall
+in a slow minute (the arm once 725 frames/s between runs of 1022-1120).
+
 A benchmark, not a test: absolute times on a shared 2-core machine are indicative, ratios less so.
 
 Usage: python experiments/benchmark.py --out out/benchmark [--json PATH] [--frames 120] [--rounds 3]
@@ -106,44 +110,74 @@ class StepTimer:
         return float(np.median(values) * 1e6) if values else None
 
 
-def arm_fps(frames: int) -> dict:
+def arm_fps(frames: int, rounds: int) -> dict:
     """The paper's arm: frames/s with and without the image, 1 and 2 views, over the whole run and
     over the frames after the first (each solved from the one before, as the paper's 19 frames/s;
     the first frame's search from the neutral pose, 8 starts of 100 steps, runs once per sequence).
-    A first run, not timed, warms the process (imports, compiled code loaded, first solver objects)."""
+    A first run, not timed, warms the process (imports, compiled code loaded, first solver objects).
+    Each figure is the median of `rounds` rounds (rounds_median)."""
     motion = load_motion(DATA / BOXING.file, BOXING.source)
     start = int(round(BOXING.start_s * motion.frame_rate))
     clip = prepare_clip("boxing_a", motion, BOXING.source, slice(start, start + 2 * frames, 2))
     rig = render_views(clip, 4, seed=1)
     run_chain("arm", clip, subset_views(rig, 1), "ibik", "qp", iterations=15)  # the warm-up, not timed
-    results: dict = {}
-    for views in (1, 2):
-        subset = subset_views(rig, views)
-        row = {}
-        for label, method in (("image", "ibik"), ("blind", "pik")):
+    settings = [(views, label, method) for views in (1, 2) for label, method in (("image", "ibik"), ("blind", "pik"))]
+    measured: dict = {(views, label): [] for views, label, _ in settings}
+    for _ in range(rounds):
+        for views, label, method in settings:
             started = time.perf_counter()
-            run = run_chain("arm", clip, subset if method == "ibik" else None, method, "qp", iterations=15)
+            run = run_chain("arm", clip, subset_views(rig, views) if method == "ibik" else None, method, "qp",
+                            iterations=15)
             seconds = time.perf_counter() - started
-            row[label] = {"fps": len(clip.q) / seconds, "tracked_fps": (len(clip.q) - 1) / run.tracked_seconds,
-                          "elbow_error_mm": run.mean_error_mm}
-        results[f"views_{views}"] = row
+            measured[(views, label)].append({"fps": len(clip.q) / seconds,
+                                             "tracked_fps": (len(clip.q) - 1) / run.tracked_seconds,
+                                             "elbow_error_mm": run.mean_error_mm})
+    results: dict = {}
+    for (views, label), runs in measured.items():
+        results.setdefault(f"views_{views}", {})[label] = rounds_median(runs, ("fps", "tracked_fps"),
+                                                                        "elbow_error_mm")
     return results
 
 
-def whole_body(frames: int, cache: Path) -> tuple[dict, dict, cProfile.Profile]:
-    """`ibik track` per scheme and view count; the qp 2-view run profiled and its steps timed."""
+def rounds_median(runs: list[dict], timed: tuple[str, ...], exact: str) -> dict:
+    """One setting's figures over the rounds: each timed figure the median of the rounds' (all kept,
+    as `<figure>_rounds`), the error once. The rounds take the settings in turn, so that a slow
+    minute of the shared machine falls on one round of each setting rather than on every round of
+    one. The error is the same in every round (the solves are deterministic, whatever the two
+    processes' timing: tests/test_tracker.py); a round that differs is an error, not noise."""
+    if len({run[exact] for run in runs}) != 1:
+        raise RuntimeError(f"{exact} differs between rounds: {[run[exact] for run in runs]}")
+    figures = {key: float(np.median([run[key] for run in runs])) for key in timed}
+    figures[exact] = runs[0][exact]
+    figures.update({f"{key}_rounds": [run[key] for run in runs] for key in timed})
+    return figures
+
+
+def whole_body(frames: int, cache: Path, rounds: int) -> tuple[dict, dict, cProfile.Profile]:
+    """`ibik track` per scheme and view count, each the median of `rounds` rounds (rounds_median);
+    the qp 2-view run profiled and its steps timed."""
     inputs = prepare_inputs(BOXING, DATA, frames, cache)
-    results: dict = {scheme: {} for scheme in SCHEMES}
     profile = cProfile.Profile()
     out = cache.parent / "benchmark_runs"
-    for views in (2, 4):
-        for scheme in SCHEMES:
+    settings = [(scheme, views) for views in (2, 4) for scheme in SCHEMES]
+    measured: dict = {setting: [] for setting in [*settings, ("pik", 0)]}
+    for _ in range(rounds):
+        for scheme, views in settings:
             folder = out / f"{scheme}_{views}v"
             run = run_variant(inputs, variant(f"ibik{views}v"), "clean", {"method": scheme}, out=folder)
-            results[scheme][f"views_{views}"] = {"fps": run.loop_fps, "solve_fps": run.solve_fps,
-                                                 "judged_error_mm": run.judged_mm,
-                                                 "wall_s": run.wall_seconds,
-                                                 "mean_iterations_per_frame": _mean_iterations(folder)}
+            measured[(scheme, views)].append({"fps": run.loop_fps, "solve_fps": run.solve_fps,
+                                              "wall_s": run.wall_seconds, "judged_error_mm": run.judged_mm})
+        blind = run_variant(inputs, variant("pik"), "clean", out=out / "pik")
+        measured[("pik", 0)].append({"fps": blind.loop_fps, "solve_fps": blind.solve_fps,
+                                     "wall_s": blind.wall_seconds, "judged_error_mm": blind.judged_mm})
+    results: dict = {scheme: {} for scheme in SCHEMES}
+    for (scheme, views), runs in measured.items():
+        figures = rounds_median(runs, ("fps", "solve_fps", "wall_s"), "judged_error_mm")
+        if scheme == "pik":
+            results["pik"] = figures
+        else:
+            figures["mean_iterations_per_frame"] = _mean_iterations(out / f"{scheme}_{views}v")
+            results[scheme][f"views_{views}"] = figures
     # Once more profiled, apart from the timed steps (step_rounds): the profiler's cost per call,
     # several times a small numpy call's, would weigh on our steps and not on Pink's. On one thread:
     # cProfile sees the calling thread only, and the support images would be built in another.
@@ -151,8 +185,6 @@ def whole_body(frames: int, cache: Path) -> tuple[dict, dict, cProfile.Profile]:
     run_variant(inputs, variant("ibik2v"), "clean", {"method": "qp", "read_ahead": "off"},
                 out=out / "qp_2v_profiled")
     profile.disable()
-    blind = run_variant(inputs, variant("pik"), "clean", out=out / "pik")
-    results["pik"] = {"fps": blind.loop_fps, "solve_fps": blind.solve_fps, "judged_error_mm": blind.judged_mm}
     return results, {"inputs": inputs, "q_run": out / "qp_2v"}, profile
 
 
@@ -246,14 +278,16 @@ def main() -> None:
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--json", type=Path, help="where the figures go (default: OUT/benchmark.json)")
     parser.add_argument("--frames", type=int, default=120)
-    parser.add_argument("--rounds", type=int, default=3, help="our steps and Pink's, timed in turn (default 3)")
+    parser.add_argument("--rounds", type=int, default=3,
+                        help="rounds of every timed figure, each figure their median; our steps and Pink's timed "
+                        "in turn in each (default 3)")
     parser.add_argument("--cache", type=Path, help="where the rendered inputs are kept (default: OUT/cache; the "
                         "real-mocap benchmark's cache is reused when given)")
     arguments = parser.parse_args()
     arguments.out.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
-    arm = arm_fps(arguments.frames)
-    body, context, profile = whole_body(arguments.frames, arguments.cache or arguments.out / "cache")
+    arm = arm_fps(arguments.frames, arguments.rounds)
+    body, context, profile = whole_body(arguments.frames, arguments.cache or arguments.out / "cache", arguments.rounds)
     steps, pink_results, ratios = step_rounds(context["inputs"], context["q_run"], arguments.frames,
                                               arguments.rounds)
     ours = body["qp"]["views_2"]
@@ -262,19 +296,25 @@ def main() -> None:
                "split_qp_2_views_s": time_split(profile),
                "peak_memory_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
                "frames": arguments.frames, "wall_s": time.perf_counter() - started}
-    lines = ["| the paper's arm, 15 steps a frame | frames/s, whole run | frames/s, frames after the first | "
+    def spread(values: dict, key: str, digits: int) -> str:  # the median, then the rounds' range
+        low, high = min(values[f"{key}_rounds"]), max(values[f"{key}_rounds"])
+        return f"{values[key]:.{digits}f} ({low:.{digits}f}-{high:.{digits}f})"
+
+    lines = [f"frames/s: the median of {arguments.rounds} rounds (their range)", "",
+             "| the paper's arm, 15 steps a frame | frames/s, whole run | frames/s, frames after the first | "
              "elbow error [mm] |", "| --- | ---: | ---: | ---: |"]
     for views, row in arm.items():
         for label, values in row.items():
-            lines.append(f"| {views.replace('_', ' ')}, {label} | {values['fps']:.0f} | {values['tracked_fps']:.0f} | "
-                         f"{values['elbow_error_mm']:.1f} |")
+            lines.append(f"| {views.replace('_', ' ')}, {label} | {spread(values, 'fps', 0)} | "
+                         f"{spread(values, 'tracked_fps', 0)} | {values['elbow_error_mm']:.1f} |")
     lines += ["", "| setting | frames/s | frames/s, solves alone | error [mm] |", "| --- | ---: | ---: | ---: |"]
     for scheme in SCHEMES:
         for views, values in body[scheme].items():
-            lines.append(f"| whole body {scheme}, {views.replace('_', ' ')} | {values['fps']:.1f} | "
-                         f"{values['solve_fps']:.1f} | {values['judged_error_mm']:.1f} |")
-    lines.append(f"| whole body, blind (PIK) | {body['pik']['fps']:.1f} | {body['pik']['solve_fps']:.1f} | "
-                 f"{body['pik']['judged_error_mm']:.1f} |")
+            lines.append(f"| whole body {scheme}, {views.replace('_', ' ')} | {spread(values, 'fps', 1)} | "
+                         f"{spread(values, 'solve_fps', 1)} | {values['judged_error_mm']:.1f} |")
+    blind = body["pik"]
+    lines.append(f"| whole body, blind (PIK) | {spread(blind, 'fps', 1)} | {spread(blind, 'solve_fps', 1)} | "
+                 f"{blind['judged_error_mm']:.1f} |")
     lines += ["", "| one step | median [us] |", "| --- | ---: |",
               f"| ours, qp, with the image (2 views) | {ours['step_with_image_us']:.0f} |",
               f"| ours, qp, without the image | {ours['step_without_image_us']:.0f} |"]
