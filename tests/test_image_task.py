@@ -130,3 +130,25 @@ def test_any_camera_of_the_protocol_serves_a_view():
     small = SupportImage(np.zeros((240, 320), dtype=np.float32))
     with pytest.raises(InputError, match="camera 'wrapped': the support image"):
         View(RenamedCamera(scene.camera, "wrapped"), small)
+
+
+def test_views_of_other_cameras_are_projected_by_those_cameras_not_the_kept_ones(human, rng):
+    # The projections are kept while the same camera objects come (SegmentCriterion._projections):
+    # views of other cameras, even of the same names and supports, must be read through the new ones.
+    q = random_human_configuration(human, rng, spread=0.3)
+    views = human_views(human, q)
+    moved = []
+    for view in views:
+        center = view.camera.center_world
+        moved.append(View(look_at_camera(view.camera.name, (320, 240), 300.0, center + [0.0, 0.3, 0.2],
+                                         center + 3.0 * view.camera.rotation[2], np.array([0.0, 1.0, 0.0])),
+                          view.support))
+    task = ImageTask(human, views)
+    before = task.compute_value(Configuration(human.model, q))
+    task.set_views(moved)
+    fresh = ImageTask(human, moved)
+    after = task.compute_value(Configuration(human.model, q))
+    assert after == fresh.compute_value(Configuration(human.model, q))
+    assert after != before  # the moved cameras see the skeleton elsewhere on the same supports
+    assert np.array_equal(task.compute_gradient(Configuration(human.model, q)),
+                          fresh.compute_gradient(Configuration(human.model, q)))

@@ -29,7 +29,6 @@ from ibik_pin.tasks.segments import SegmentCriterion, segment_ends
 from ibik_pin.vision.camera import CameraLike
 from ibik_pin.vision.candidate_kernels import moved_samples
 from ibik_pin.vision.kernels import pinhole_overlap_at_segments, support_overlap_at_segments, support_values
-from ibik_pin.vision.pinhole import pixel_projector, projector, stacked_pinhole_parameters
 from ibik_pin.vision.support import SupportImageLike
 
 
@@ -136,11 +135,9 @@ class ImageTask(SegmentCriterion):
         self._held = [view.support.held_values() for view in self._active_views]
         self._sizes = [tuple(view.support.size) for view in self._active_views]
         self._count = max(len(self._active_views), 1) * len(self._sample_start)
-        cameras = [view.camera for view in self._active_views]
         # Pinhole cameras are projected inside the overlap kernel; any other camera projects itself.
-        self._pinholes = stacked_pinhole_parameters(cameras)
-        self._project = projector(cameras) if self._pinholes is None else None
-        self._pixels = pixel_projector(cameras)
+        self._pinholes, project, self._pixels = self._projections([view.camera for view in self._active_views])
+        self._project = project if self._pinholes is None else None
         self.enabled = bool(self._active_views)
         self._cache_version = -1
 

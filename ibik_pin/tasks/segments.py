@@ -18,6 +18,8 @@ import numpy as np
 from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.tasks.base import GradientTask
+from ibik_pin.vision.camera import CameraLike, Projection
+from ibik_pin.vision.pinhole import pixel_projector, projector, stacked_pinhole_parameters
 
 __all__ = ["SegmentCriterion", "SegmentEnds", "segment_ends"]
 
@@ -73,6 +75,20 @@ class SegmentCriterion(GradientTask):
     def __init__(self, max_step_size: float = 0.05, min_step_size: float = 1e-4) -> None:
         super().__init__(max_step_size, min_step_size)
         self._move_layouts: dict[tuple, object] = {}
+        self._kept_projections: tuple | None = None
+
+    def _projections(self, cameras: Sequence[CameraLike]) -> tuple[
+            np.ndarray | None, Callable[[np.ndarray], list[Projection]],
+            Callable[[np.ndarray], list[tuple[np.ndarray, np.ndarray]]]]:
+        """The cameras' stacked pinhole parameters (None unless all are pinhole), projector and
+        pixel_projector (vision.pinhole), kept while the same camera objects come (a tracker gives the
+        same cameras' views every frame; cameras are frozen)."""
+        kept = self._kept_projections
+        if kept is None or len(kept[0]) != len(cameras) or any(
+                a is not b for a, b in zip(kept[0], cameras, strict=True)):
+            kept = self._kept_projections = (tuple(cameras), stacked_pinhole_parameters(list(cameras)),
+                                             projector(cameras), pixel_projector(cameras))
+        return kept[1], kept[2], kept[3]
 
     def _kept_for_moves(self, moves: Moves, build: Callable[[Moves], Layout]) -> Layout:
         """build(moves): what values_at_moves reads of the moves' rows and candidate counts alone,

@@ -45,7 +45,6 @@ from ibik_pin.vision.candidate_kernels import (
     segment_squared_distances,
 )
 from ibik_pin.vision.kernels import MIN_DEPTH, axis_value_and_frame_gradient
-from ibik_pin.vision.pinhole import pixel_projector, projector
 
 __all__ = ["AxisView", "SilhouetteAxisTask"]
 
@@ -104,8 +103,7 @@ class SilhouetteAxisTask(SegmentCriterion):
         """Replace the views (the next frame's axis samples); views without samples are skipped."""
         self.views = list(views)
         self._active_views = [view for view in self.views if len(view.pixels)]
-        self._project = projector([view.camera for view in self._active_views])
-        self._pixels = pixel_projector([view.camera for view in self._active_views])
+        _, self._project, self._pixels = self._projections([view.camera for view in self._active_views])
         self.enabled = bool(self._active_views)
         self._cache_version = -1
         self._cache: tuple[float, np.ndarray] | None = None
