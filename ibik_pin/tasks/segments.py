@@ -81,8 +81,9 @@ class SegmentCriterion(GradientTask):
             np.ndarray | None, Callable[[np.ndarray], list[Projection]],
             Callable[[np.ndarray], list[tuple[np.ndarray, np.ndarray]]]]:
         """The cameras' stacked pinhole parameters (None unless all are pinhole), projector and
-        pixel_projector (vision.pinhole), kept while the same camera objects come (a tracker gives the
-        same cameras' views every frame; cameras are frozen)."""
+        pixel_projector (vision.pinhole), kept while the same camera objects come: a tracker gives the
+        same cameras' views every frame. Safe to keep: a PinholeCamera is frozen, and the projectors
+        call any other camera's own projection each time."""
         kept = self._kept_projections
         if kept is None or len(kept[0]) != len(cameras) or any(
                 a is not b for a, b in zip(kept[0], cameras, strict=True)):
