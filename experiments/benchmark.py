@@ -147,7 +147,7 @@ def rounds_median(runs: list[dict], timed: tuple[str, ...], exact: str) -> dict:
     processes' timing: tests/test_tracker.py); a round that differs is an error, not noise."""
     if len({run[exact] for run in runs}) != 1:
         raise RuntimeError(f"{exact} differs between rounds: {[run[exact] for run in runs]}")
-    figures = {key: float(np.median([run[key] for run in runs])) for key in timed}
+    figures: dict = {key: float(np.median([run[key] for run in runs])) for key in timed}
     figures[exact] = runs[0][exact]
     figures.update({f"{key}_rounds": [run[key] for run in runs] for key in timed})
     return figures
