@@ -46,6 +46,8 @@ class TrackingSettings:
             motion threw into another basin of the criterion. Runs only when two views cross.
             With the trunk held (image_moves) it brought the real-mocap benchmark's boxing elbows
             from about 100 mm to under 20 mm (2 views; README).
+        swivel_refine: points the swivel search then tries on each side of a limb's best sample,
+            within one sample's spacing (tracking.swivel.SwivelSearch.refine; 0: none).
         feet_by_ankle: toe and heel targets move only the joints that do not move their ankle
             (ibik_pin.feet.foot_point_joints); False lets them move the whole leg, as a plain
             end-effector target does.
@@ -84,6 +86,7 @@ class TrackingSettings:
     axis_weight: float = 1.0
     axis_scale: float = 0.10
     swivel_search: bool = True
+    swivel_refine: int = 0
     feet_by_ankle: bool = True
     image_moves: str = "limbs"
     target_iterations: int = 5

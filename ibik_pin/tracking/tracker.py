@@ -85,7 +85,8 @@ class Tracker:
         if len(terms) > 1:
             self.image_criterion = WeightedSum([task for task, _ in terms], [weight for _, weight in terms],
                                                max_step_size=self.settings.image_step)
-        self.swivel = SwivelSearch(body, terms, inside_silhouettes=self.image_task.inside_silhouettes)
+        self.swivel = SwivelSearch(body, terms, inside_silhouettes=self.image_task.inside_silhouettes,
+                                   refine=int(self.settings.swivel_refine))
         if self.settings.image_moves not in IMAGE_MOVES:
             raise InputError(f"image_moves: expected one of {', '.join(IMAGE_MOVES)}, "
                              f"found {self.settings.image_moves!r}")
