@@ -86,7 +86,7 @@ class TrackingSettings:
     axis_weight: float = 1.0
     axis_scale: float = 0.10
     swivel_search: bool = True
-    swivel_refine: int = 0
+    swivel_refine: int = 4
     feet_by_ankle: bool = True
     image_moves: str = "limbs"
     target_iterations: int = 5
