@@ -247,3 +247,43 @@ def test_both_terms_answer_moves_of_any_size_as_values_at(human, rng):
             candidates[:, rows[0]] = placed
             np.testing.assert_allclose(values, task.values_at(candidates, moved=rows), rtol=1e-13, atol=1e-13)
         assert np.ptp(answers[0]) > 0.0  # the candidates really differ
+
+
+def test_the_circle_at_given_angles_is_the_circle_of_that_many_even_samples(rng):
+    roots, middles, ends = rng.normal(size=(3, 2, 3))
+    even = 2.0 * np.pi * np.arange(8) / 8
+    np.testing.assert_array_equal(swivel_circle(roots, middles, ends, 8, angles=even),
+                                  swivel_circle(roots, middles, ends, 8))
+    per_limb = np.array([even[:3], even[5:]])  # each limb its own angles
+    circles = swivel_circle(roots, middles, ends, 3, angles=per_limb)
+    np.testing.assert_allclose(circles[0], swivel_circle(roots, middles, ends, 8)[0, :3], rtol=0, atol=1e-14)
+    np.testing.assert_allclose(circles[1], swivel_circle(roots, middles, ends, 8)[1, 5:], rtol=0, atol=1e-14)
+
+
+def test_the_second_pass_brings_a_coarse_hint_closer_to_the_pose_of_the_silhouette(human):
+    import pinocchio as pin
+
+    true_q = pin.neutral(human.model)
+    for joint, angle in [("left_shoulder_X", -1.2), ("left_elbow_Z", 1.3)]:
+        true_q[human.model.joints[human.model.getJointId(joint)].idx_q] = angle
+    image_views, axis_views = _views(human, true_q)
+    terms = [(ImageTask(human, image_views), 1.0), (SilhouetteAxisTask(human, axis_views), 1.0)]
+    truth = Configuration(human.model, true_q).frame_position(human.frame_id("LElbow")).copy()
+    configuration = Configuration(human.model, true_q)
+    shoulder, elbow, wrist = configuration.frame_positions(human.frame_ids(["LShoulder", "LElbow", "LWrist"]))
+    # The elbow swivelled 100 degrees away: 8 samples (45 degrees apart) cannot land on the truth.
+    wrong = swivel_circle(shoulder, elbow, wrist, 1, angles=np.array([np.deg2rad(100.0)]))[0]
+
+    class Moved:  # the configuration's positions with the elbow moved, as the search reads them
+        def frame_positions(self, ids):
+            positions = configuration.frame_positions(ids).copy()
+            positions[np.asarray(ids) == human.frame_id("LElbow")] = wrong
+            return positions
+
+    coarse = SwivelSearch(human, terms, samples=8).hints(Moved(), ["LElbow"])["LElbow"]
+    refined = SwivelSearch(human, terms, samples=8, refine=4).hints(Moved(), ["LElbow"])["LElbow"]
+    radius = np.linalg.norm(truth - (shoulder + wrist) / 2.0)  # about the circle's, for the scale
+    assert np.linalg.norm(coarse - truth) > 0.1 * radius  # 45-degree steps leave it off (30 mm here)
+    assert np.linalg.norm(refined - truth) < 0.5 * np.linalg.norm(coarse - truth)  # 3 mm here
+    with pytest.raises(InputError, match="refine"):
+        SwivelSearch(human, terms, refine=-1)
