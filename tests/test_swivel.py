@@ -203,7 +203,9 @@ def test_the_search_reading_each_term_at_the_pose_gives_the_values_of_one_comput
 
         monkeypatch.setattr(task, "values_at_moves", recorded)
     hints = search.hints(configuration, limbs)
-    assert [len(moves) for _, _, moves, _ in answers] == [len(limbs)] * 2  # every limb, by both terms
+    # Every limb, by both terms, in each pass (the samples, then the finer points around the best).
+    assert [len(moves) for _, _, moves, _ in answers] == [len(limbs)] * 4
+    assert [len(moves[0][1]) for _, _, moves, _ in answers] == [36, 36, 8, 8]
     for task, positions, moves, values in answers:
         for (rows, placed), mine in zip(moves, values, strict=True):
             candidates = np.repeat(positions[None], len(placed), axis=0)
@@ -280,7 +282,7 @@ def test_the_second_pass_brings_a_coarse_hint_closer_to_the_pose_of_the_silhouet
             positions[np.asarray(ids) == human.frame_id("LElbow")] = wrong
             return positions
 
-    coarse = SwivelSearch(human, terms, samples=8).hints(Moved(), ["LElbow"])["LElbow"]
+    coarse = SwivelSearch(human, terms, samples=8, refine=0).hints(Moved(), ["LElbow"])["LElbow"]
     refined = SwivelSearch(human, terms, samples=8, refine=4).hints(Moved(), ["LElbow"])["LElbow"]
     radius = np.linalg.norm(truth - (shoulder + wrist) / 2.0)  # about the circle's, for the scale
     assert np.linalg.norm(coarse - truth) > 0.1 * radius  # 45-degree steps leave it off (30 mm here)

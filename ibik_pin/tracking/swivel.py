@@ -150,7 +150,7 @@ class SwivelSearch:
     min_distance: float = 0.02
     min_radius: float = 2.0 * LIMB_HALF_WIDTH
     inside_silhouettes: Callable[[np.ndarray], np.ndarray] | None = None
-    refine: int = 0
+    refine: int = 4
 
     def __post_init__(self) -> None:
         if int(self.samples) < 3:
