@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -58,6 +59,46 @@ def views_cross(cameras: Sequence, min_angle_deg: float = 45.0) -> bool:
     return any(abs(float(a @ b)) < limit for index, a in enumerate(axes) for b in axes[index + 1:])
 
 
+class _Circles(NamedTuple):
+    """L limbs' swivel circles: centre and radius (L, 3), (L,); the unit vectors toward the middle
+    joint and along axis x first (L, 3); the middle joints (L, 3); the limbs without a circle (L,)."""
+
+    centre: np.ndarray
+    radius: np.ndarray
+    first: np.ndarray
+    second: np.ndarray
+    middle: np.ndarray
+    degenerate: np.ndarray
+
+    def at(self, angles: np.ndarray) -> np.ndarray:
+        """The points at swivels [rad] (A,) shared by every limb, or (L, A) per limb: (L, A, 3)."""
+        angles = np.atleast_2d(angles)[:, :, None]
+        points = self.centre[:, None] + self.radius[:, None, None] * (np.cos(angles) * self.first[:, None]
+                                                                     + np.sin(angles) * self.second[:, None])
+        points[self.degenerate] = self.middle[self.degenerate][:, None]
+        return points
+
+
+def _circles(root: np.ndarray, middle: np.ndarray, end: np.ndarray) -> _Circles:
+    """The swivel circles of limbs (L, 3) each (the search places two sets of points on them)."""
+    axis = end - root
+    length = np.sqrt(np.einsum("li,li->l", axis, axis))
+    axis = axis / np.maximum(length, 1e-9)[:, None]
+    centre = root + np.einsum("li,li->l", middle - root, axis)[:, None] * axis
+    radial = middle - centre
+    radius = np.sqrt(np.einsum("li,li->l", radial, radial))
+    first = radial / np.maximum(radius, 1e-9)[:, None]
+    second = np.stack([axis[:, 1] * first[:, 2] - axis[:, 2] * first[:, 1],  # axis x first
+                       axis[:, 2] * first[:, 0] - axis[:, 0] * first[:, 2],
+                       axis[:, 0] * first[:, 1] - axis[:, 1] * first[:, 0]], axis=1)
+    return _Circles(centre, radius, first, second, middle, (length < 1e-9) | (radius < 1e-9))
+
+
+def _even(count: int) -> np.ndarray:
+    """`count` swivels [rad] evenly around the circle, from 0."""
+    return 2.0 * np.pi * np.arange(count) / count
+
+
 def swivel_circle(root: np.ndarray, middle: np.ndarray, end: np.ndarray, count: int,
                   angles: np.ndarray | None = None) -> np.ndarray:
     """Positions of the middle joint swivelled about the root-end line, distances to both kept.
@@ -73,25 +114,8 @@ def swivel_circle(root: np.ndarray, middle: np.ndarray, end: np.ndarray, count: 
     """
     root, middle, end = (np.asarray(point, dtype=float) for point in (root, middle, end))
     single = root.ndim == 1
-    root, middle, end = (np.atleast_2d(point) for point in (root, middle, end))
-    axis = end - root
-    length = np.sqrt(np.einsum("li,li->l", axis, axis))
-    axis = axis / np.maximum(length, 1e-9)[:, None]
-    centre = root + np.einsum("li,li->l", middle - root, axis)[:, None] * axis
-    radial = middle - centre
-    radius = np.sqrt(np.einsum("li,li->l", radial, radial))
-    first = radial / np.maximum(radius, 1e-9)[:, None]
-    second = np.stack([axis[:, 1] * first[:, 2] - axis[:, 2] * first[:, 1],  # axis x first
-                       axis[:, 2] * first[:, 0] - axis[:, 0] * first[:, 2],
-                       axis[:, 0] * first[:, 1] - axis[:, 1] * first[:, 0]], axis=1)
-    if angles is None:
-        angles = 2.0 * np.pi * np.arange(count) / count
-    # (L, A, 1) for per-limb angles, (1, A, 1) for angles shared by every limb.
-    angles = np.atleast_2d(angles)[:, :, None]
-    circles = centre[:, None] + radius[:, None, None] * (np.cos(angles) * first[:, None]
-                                                        + np.sin(angles) * second[:, None])
-    degenerate = (length < 1e-9) | (radius < 1e-9)
-    circles[degenerate] = middle[degenerate][:, None]
+    circles = _circles(*(np.atleast_2d(point) for point in (root, middle, end))).at(
+        _even(count) if angles is None else angles)
     return circles[0] if single else circles
 
 
@@ -207,7 +231,8 @@ class SwivelSearch:
         if chosen.size == 0:
             return {}
         samples = int(self.samples)
-        circles = swivel_circle(roots[chosen], middles[chosen], ends[chosen], samples)  # (L', C, 3)
+        circle = _circles(roots[chosen], middles[chosen], ends[chosen])
+        circles = circle.at(_even(samples))  # (L', C, 3)
         # Each term at the frame's pose once, and every limb's candidates in one call per term.
         poses: list[tuple[np.ndarray, object] | None] = []
         for task, weight in self.terms:
@@ -222,8 +247,7 @@ class SwivelSearch:
             best = np.argmax(weighted.sum(axis=0), axis=1)
             offsets = np.arange(1, int(self.refine) + 1) / (int(self.refine) + 1)
             offsets = np.concatenate([-offsets[::-1], offsets]) * (2.0 * np.pi / samples)
-            finer = swivel_circle(roots[chosen], middles[chosen], ends[chosen], offsets.size,
-                                  angles=2.0 * np.pi * best[:, None] / samples + offsets)
+            finer = circle.at(2.0 * np.pi * best[:, None] / samples + offsets)
             finer_weighted, _ = self._weighted(poses, limb_ids[chosen, 1], finer)
             circles = np.concatenate([circles, finer], axis=1)
             weighted = np.concatenate([weighted, finer_weighted], axis=2)
