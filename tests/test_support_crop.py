@@ -195,7 +195,7 @@ def test_a_window_that_also_covers_a_box_reads_it_on_the_window_with_the_whole_f
     assert checked > 15
 
 
-@pytest.mark.parametrize("cap", [1.0, 2.5, 6.0, 13.7])
+@pytest.mark.parametrize("cap", [1.0, 2.5, 6.0, 13.7, 19.5, 27.0])  # the near transform up to 20 px, then the separable one
 def test_an_inside_distance_exact_up_to_a_limit_gives_the_capped_support_of_the_whole_transform(cap):
     """The transform that leaves out the columns farther than the limit: exact values up to it,
     values beyond it where the distance is; the supports it gives, windowed and whole-frame, are the
@@ -206,6 +206,8 @@ def test_an_inside_distance_exact_up_to_a_limit_gives_the_capped_support_of_the_
     rng = np.random.default_rng(12)
     for _ in range(20):  # speckle: runs of every length
         masks.append((rng.random((60, 80)) < rng.uniform(0.3, 0.95)).astype(np.uint8))
+    for shape in ((1, 40), (40, 1), (2, 3)):  # rows and columns narrower than the reach
+        masks.append((rng.random(shape) < 0.5).astype(np.uint8))
     for mask in masks:
         scanned = scan_mask(mask)
         if scanned.box is None or scanned.set_pixels == mask.size:

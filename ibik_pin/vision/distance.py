@@ -101,15 +101,18 @@ def inside_distance(mask: np.ndarray, box: tuple[slice, slice] | None = None,
     one pixel (`box`: that bounding box if known, box_around(mask)); what both the support image
     and the medial axis read, computed once for them. `limit` [px]: the values need only be exact
     up to it (a capped support's, without a medial axis, which needs them all): the transform then
-    leaves out the pixels whose column alone puts them farther, a quarter of its time on silhouettes.
+    looks no farther than it along rows and columns, half its time on silhouettes at a 7 px limit.
     """
     box = box_around(mask) if box is None else box
     grown_box = grown(box, 1, mask.shape)
-    # A pixel within `limit` of its nearest source lies within `limit` of it along its column too.
-    column_limit = -1 if limit is None else int(np.floor(limit))
-    # The compiled transform reads the strided view: no contiguous copy first.
-    return InsideDistance(_distances(mask[grown_box].view(np.uint8), False, column_limit), grown_box, box,
-                          None if limit is None else float(limit))
+    pixels = mask[grown_box].view(np.uint8)  # the compiled transforms read the strided view: no copy first
+    if limit is None:
+        return InsideDistance(_distances(pixels, False, -1), grown_box, box)
+    # A pixel within `limit` of its nearest source lies within `limit` of it along its row and its
+    # column: the near transform, within a support's usual caps; beyond them, the separable one.
+    reach = int(np.floor(limit))
+    values = _near_distances(pixels, False, reach) if reach <= _NEAR_REACH else _distances(pixels, False, reach)
+    return InsideDistance(values, grown_box, box, float(limit))
 
 
 def signed_distance(mask: np.ndarray, region: tuple[slice, slice] | None = None,
@@ -264,6 +267,52 @@ def _distances(image, to_set, column_limit):
         for pixel in range(width):
             if column[i, pixel] == 0:
                 out[i, pixel] = 0.0
+    return out
+
+
+# Up to this reach [px] the near transform is the faster: 109 against 196 us at 7 px on a boxing
+# silhouette's box of 47,000 pixels, 203 against 242 at 20 (each shift of the row pass adds ~7 us).
+_NEAR_REACH = 20
+
+
+@njit(cache=True, nogil=True)
+def _near_distances(image, to_set, reach):
+    """The distance of every pixel to the nearest source pixel (see _distances), exact up to `reach`
+    (whole pixels, at most 20) and above it beyond: a source within reach lies within reach along
+    the row and along the column, so each pixel takes the least s^2 + g^2 over the columns s
+    pixels away (|s| <= reach) whose own distance g to a source is at most reach. Shift by shift
+    over whole rows, which the compiler vectorises (16-bit lanes), where the envelope of
+    _distances is a sequential search with a division per parabola."""
+    height, width = image.shape
+    far = np.int16(reach + 1)  # a column distance left out
+    none = np.int16(16384)  # no source within reach; none + reach^2 stays within 16 bits
+    column = np.empty((height, width), np.int16)
+    for j in range(width):
+        column[0, j] = 0 if (image[0, j] != 0) == to_set else far
+    for i in range(1, height):
+        for j in range(width):
+            column[i, j] = 0 if (image[i, j] != 0) == to_set else min(column[i - 1, j] + 1, far)
+    for i in range(height - 2, -1, -1):
+        for j in range(width):
+            column[i, j] = min(column[i, j], column[i + 1, j] + 1)
+    padded = np.full(width + 2 * reach, none, np.int16)  # a row's squared column distances, padded
+    inner = padded[reach:reach + width]
+    least = np.empty(width, np.int16)
+    out = np.empty((height, width), np.float32)
+    for i in range(height):
+        row = column[i]
+        for j in range(width):
+            squared = none if row[j] == far else row[j] * row[j]
+            inner[j] = squared
+            least[j] = squared
+        for s in range(1, reach + 1):
+            # Slices, not padded[j - s]: an index that may be negative keeps the loop from vectorising.
+            left, right, s2 = padded[reach - s:reach - s + width], padded[reach + s:reach + s + width], np.int16(s * s)
+            for j in range(width):
+                least[j] = min(least[j], min(left[j], right[j]) + s2)
+        out_row = out[i]
+        for j in range(width):
+            out_row[j] = np.inf if least[j] >= none else np.sqrt(np.float32(least[j]))
     return out
 
 
