@@ -195,9 +195,10 @@ def test_a_window_that_also_covers_a_box_reads_it_on_the_window_with_the_whole_f
     assert checked > 15
 
 
-@pytest.mark.parametrize("cap", [1.0, 2.5, 6.0, 13.7, 19.5, 27.0])  # the near transform up to 20 px, then the separable one
+# The near transform up to a 20 px reach, the separable one beyond.
+@pytest.mark.parametrize("cap", [1.0, 2.5, 6.0, 13.7, 19.5, 27.0])
 def test_an_inside_distance_exact_up_to_a_limit_gives_the_capped_support_of_the_whole_transform(cap):
-    """The transform that leaves out the columns farther than the limit: exact values up to it,
+    """The transform that looks no farther than the limit: exact values up to it,
     values beyond it where the distance is; the supports it gives, windowed and whole-frame, are the
     same to the bit."""
     from ibik_pin.vision.distance import inside_distance
