@@ -194,6 +194,22 @@ def _as_uint8(image: np.ndarray) -> np.ndarray:
     return (image if image.dtype == np.bool_ else image != 0).view(np.uint8)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _column_distances(image, to_set, far, column):
+    """Each pixel's distance along its column to the nearest source pixel (the set pixels with
+    `to_set`, else the zero ones), at most `far`, into `column` (H, W) of whole numbers. Inlined:
+    called, it left the transforms that share it 20-60% slower."""
+    height, width = image.shape
+    for j in range(width):
+        column[0, j] = 0 if (image[0, j] != 0) == to_set else far
+    for i in range(1, height):
+        for j in range(width):
+            column[i, j] = 0 if (image[i, j] != 0) == to_set else min(column[i - 1, j] + 1, far)
+    for i in range(height - 2, -1, -1):
+        for j in range(width):
+            column[i, j] = min(column[i, j], column[i + 1, j] + 1)
+
+
 @njit(cache=True, nogil=True)
 def _distances(image, to_set, column_limit):
     """Exact Euclidean distance of every pixel to the nearest source pixel: the set pixels with
@@ -207,14 +223,7 @@ def _distances(image, to_set, column_limit):
     far = height + width  # beyond any distance within the image: no source in that column
     skipped = far if column_limit < 0 else min(column_limit + 1, far)  # a column distance left out
     column = np.empty((height, width), np.int32)
-    for j in range(width):
-        column[0, j] = 0 if (image[0, j] != 0) == to_set else far
-    for i in range(1, height):
-        for j in range(width):
-            column[i, j] = 0 if (image[i, j] != 0) == to_set else min(column[i - 1, j] + 1, far)
-    for i in range(height - 2, -1, -1):
-        for j in range(width):
-            column[i, j] = min(column[i, j], column[i + 1, j] + 1)
+    _column_distances(image, to_set, far, column)
     out = np.empty((height, width), np.float32)
     apexes = np.empty(width, np.int64)  # the envelope's parabolas: where each is lowest,
     offsets = np.empty(width, np.int64)  # g_p^2 + p^2 of each,
@@ -287,14 +296,7 @@ def _near_distances(image, to_set, reach):
     far = np.int16(reach + 1)  # a column distance left out
     none = np.int16(16384)  # no source within reach; none + reach^2 stays within 16 bits
     column = np.empty((height, width), np.int16)
-    for j in range(width):
-        column[0, j] = 0 if (image[0, j] != 0) == to_set else far
-    for i in range(1, height):
-        for j in range(width):
-            column[i, j] = 0 if (image[i, j] != 0) == to_set else min(column[i - 1, j] + 1, far)
-    for i in range(height - 2, -1, -1):
-        for j in range(width):
-            column[i, j] = min(column[i, j], column[i + 1, j] + 1)
+    _column_distances(image, to_set, far, column)
     padded = np.full(width + 2 * reach, none, np.int16)  # a row's squared column distances, padded
     inner = padded[reach:reach + width]
     least = np.empty(width, np.int16)
