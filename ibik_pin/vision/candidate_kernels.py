@@ -130,8 +130,11 @@ def candidate_axis_values(samples, starts, ends, fixed, scale, values):
                 offset_u -= s * along_u[k, c]
                 offset_v -= s * along_v[k, c]
                 best[c] = min(best[c], offset_u * offset_u + offset_v * offset_v)
+        # The exponential (a library call, not vectorised) once for the candidates that no segment
+        # of their own came nearer to: the same value, for most candidates of a sample.
+        at_fixed = 1.0 - np.exp(-fixed[i] * inverse_scale_squared)
         for c in range(candidates):
-            values[c] += 1.0 - np.exp(-best[c] * inverse_scale_squared)
+            values[c] += at_fixed if best[c] == fixed[i] else 1.0 - np.exp(-best[c] * inverse_scale_squared)
     for c in range(candidates):
         values[c] = -0.5 * scale * (values[c] + shared) / max(samples.shape[0], 1)
 
