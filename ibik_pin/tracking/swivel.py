@@ -182,6 +182,7 @@ class SwivelSearch:
         if int(self.refine) < 0:
             raise InputError(f"refine: expected a number of points >= 0, found {self.refine}")
         self._limb_ids: dict[str, np.ndarray] = {}
+        self._term_rows: dict[tuple[SegmentCriterion, int], np.ndarray] = {}
 
     def _limb_frame_ids(self, name: str) -> np.ndarray:
         """The frames of a limb's root, middle joint and end, shape (3,) (looked up once)."""
@@ -189,6 +190,14 @@ class SwivelSearch:
         if ids is None:
             ids = self._limb_ids[name] = self.body.frame_ids([LIMB_ENDS[name][0], name, LIMB_ENDS[name][1]])
         return ids
+
+    def _rows_of(self, task: SegmentCriterion, frame_id: int) -> np.ndarray:
+        """The rows of a term's segment ends that are frame `frame_id` (looked up once per term and
+        frame: a term's segment ends are fixed)."""
+        rows = self._term_rows.get((task, frame_id))
+        if rows is None:
+            rows = self._term_rows[(task, frame_id)] = np.flatnonzero(task.frame_ids == frame_id)
+        return rows
 
     def _weighted(self, poses: list, middle_ids: np.ndarray,
                   circles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -203,7 +212,7 @@ class SwivelSearch:
                 continue
             moves, movers = [], []
             for limb, middle_id in enumerate(middle_ids):
-                rows = np.flatnonzero(task.frame_ids == middle_id)
+                rows = self._rows_of(task, int(middle_id))
                 if rows.size:
                     moves.append((rows, circles[limb]))
                     movers.append(limb)
