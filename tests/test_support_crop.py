@@ -227,6 +227,15 @@ def test_an_inside_distance_exact_up_to_a_limit_gives_the_capped_support_of_the_
         assert np.array_equal(support.values, expected.values)
 
 
+@pytest.mark.parametrize("limit", [0.0, -3.0, float("nan"), float("inf")])
+def test_an_inside_distance_limit_must_be_a_positive_number_of_pixels(limit):
+    from ibik_pin.vision.distance import inside_distance
+
+    scanned = scan_mask(next(iter(random_silhouettes(seed=2, count=1))))
+    with pytest.raises(InputError, match="limit: expected a positive number of pixels"):
+        inside_distance(scanned.mask, scanned.box, limit=limit)
+
+
 def test_a_limited_inside_distance_is_refused_where_more_of_it_is_read():
     from ibik_pin.vision.distance import inside_distance
 

@@ -102,12 +102,17 @@ def inside_distance(mask: np.ndarray, box: tuple[slice, slice] | None = None,
     and the medial axis read, computed once for them. `limit` [px]: the values need only be exact
     up to it (a capped support's, without a medial axis, which needs them all): the transform then
     looks no farther than it along rows and columns, half its time on silhouettes at a 7 px limit.
+
+    Raises:
+        InputError: `limit` is not a positive number of pixels.
     """
     box = box_around(mask) if box is None else box
     grown_box = grown(box, 1, mask.shape)
     pixels = mask[grown_box].view(np.uint8)  # the compiled transforms read the strided view: no copy first
     if limit is None:
         return InsideDistance(_distances(pixels, False, -1), grown_box, box)
+    if not (np.isfinite(limit) and limit > 0.0):
+        raise InputError(f"limit: expected a positive number of pixels or None, found {limit}")
     # A pixel within `limit` of its nearest source lies within `limit` of it along its row and its
     # column: the near transform, within a support's usual caps; beyond them, the separable one.
     reach = int(np.floor(limit))
