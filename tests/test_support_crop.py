@@ -9,7 +9,7 @@ import pytest
 from ibik_pin.exceptions import InputError
 from ibik_pin.vision.distance import box_around, distance_to_background, scan_mask, signed_distance
 from ibik_pin.vision.medial_axis import medial_axis_pixels
-from ibik_pin.vision.support import SupportImage, support_from_mask
+from ibik_pin.vision.support import SILHOUETTE_MARGIN_PX, TARGETS_MARGIN_PX, SupportImage, support_from_mask
 
 
 def random_silhouettes(seed: int, count: int, size=(120, 160)):
@@ -145,8 +145,9 @@ def test_a_support_read_on_its_window_around_the_silhouette_equals_the_whole_fra
         support = support_from_mask(mask, inside_cap_px=4.0, smooth_sigma_px=smooth_sigma_px)
         reference = SupportImage(whole_frame_support(mask, 4.0, smooth_sigma_px))
         rows, columns = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
-        near = np.column_stack([rng.uniform(columns[0] - 20, columns[-1] + 20, 200),
-                                rng.uniform(rows[0] - 20, rows[-1] + 20, 200)])
+        reach = SILHOUETTE_MARGIN_PX  # the window's margin about the silhouette's box
+        near = np.column_stack([rng.uniform(columns[0] - reach, columns[-1] + reach, 200),
+                                rng.uniform(rows[0] - reach, rows[-1] + reach, 200)])
         far = np.column_stack([rng.uniform(-50, size[1] + 50, 200), rng.uniform(-50, size[0] + 50, 200)])
         for pixels in (near, far):
             sample, expected = support.sample(pixels), reference.sample(pixels)
@@ -186,9 +187,11 @@ def test_a_window_that_also_covers_a_box_reads_it_on_the_window_with_the_whole_f
         assert np.array_equal(sample.gradient, expected.gradient)
         checked += support._values is None  # read on the window, no whole frame computed
         held, row, column = support.held_values()
-        if support._values is None:
-            assert row <= box[0].start and column <= box[1].start
-            assert row + held.shape[0] >= min(box[0].stop, height) and column + held.shape[1] >= min(box[1].stop, width)
+        if support._values is None:  # the window holds the box grown by its margin, within the frame
+            grown = TARGETS_MARGIN_PX
+            assert row <= max(box[0].start - grown, 0) and column <= max(box[1].start - grown, 0)
+            assert row + held.shape[0] >= min(box[0].stop + grown, height)
+            assert column + held.shape[1] >= min(box[1].stop + grown, width)
         for odd in ((slice(height + 5, height + 50), slice(0, 10)), (slice(20, 20), slice(0, 0))):
             assert np.array_equal(support_from_mask(mask, 4.0, None, smooth_sigma_px, also_around=odd).values,
                                   reference.values)

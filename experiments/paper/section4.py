@@ -50,7 +50,7 @@ from ibik_pin.tracking.first_frame import solve_first_frame
 from ibik_pin.tracking.frame_images import FrameImagesAhead, frame_images
 from ibik_pin.tracking.settings import TrackingSettings
 from ibik_pin.tracking.tracker import Tracker
-from ibik_pin.tracking.views import support_caps
+from ibik_pin.tracking.views import support_caps, target_boxes
 from ibik_pin.vision.segmentation import TemporalMajority
 
 # Moderate segmentation defects at HumanEva's 640 x 480: a mask 1 px tight or 2 px loose, a small
@@ -263,8 +263,11 @@ def run_chain(
         image_task = ImageTask(body, (), samples_per_segment=8, max_step_size=image_step)
         levels.append([image_task])
         caps = support_caps(views.cameras, clip.keypoint("Hip")[0])
-        # As `ibik track`: each frame's support images built ahead (by default in a child process).
-        prepare = functools.partial(frame_images, views.masks.__getitem__, views.cameras, caps, None)
+        # As `ibik track`: each frame's support images built ahead (by default in a child process),
+        # their windows covering the known points (the chain's base and its end's target).
+        known = np.stack([clip.keypoint(chain.root), targets], axis=1)
+        prepare = functools.partial(frame_images, views.masks.__getitem__, views.cameras, caps, None,
+                                    target_boxes=target_boxes(views.cameras, known))
     chain_ids = body.frame_ids(list(body.keypoints))  # base, internal joint, end effector
     placements = _base_placements(chain, clip)
     configuration = Configuration(model)

@@ -230,9 +230,10 @@ def support_from_mask(
         inside: the mask's vision.distance.inside_distance if known (shared with the medial axis);
             one computed with a `limit` needs an inside cap of at most limit - 0.5 px.
         also_around: (rows, columns) of the frame that the window of computed values covers besides
-            the silhouette (where the skeleton is expected: the tracker's projected targets). A read
-            outside the window computes the whole frame, which costs most where silhouettes are
-            partial (background subtraction keeps the moving limbs).
+            the silhouette, with a wider margin (where the skeleton is expected: the tracker's
+            projected targets; SILHOUETTE_MARGIN_PX, TARGETS_MARGIN_PX). A read outside the window
+            computes the whole frame, which costs most where silhouettes are partial (background
+            subtraction keeps the moving limbs).
 
     Returns:
         The support [px]. An empty mask gives zeros with ``enabled=False`` and an
@@ -267,13 +268,12 @@ def support_from_mask(
         raise InputError(f"inside: its values are exact up to {inside.limit} px only, which an inside cap "
                          f"of {inside_cap_px} px exceeds (the cap must be at most limit - 0.5)")
     recipe = _Recipe(mask, inside, inside_cap_px, outside_cap_px, smooth_sigma_px)
-    box = inside.silhouette_box
+    boxes = [(inside.silhouette_box, SILHOUETTE_MARGIN_PX)]
     if also_around is not None:
         rows, columns = also_around
         if rows.start < rows.stop and columns.start < columns.stop:  # clipped to the frame by _window_around
-            box = (slice(min(box[0].start, rows.start), max(box[0].stop, rows.stop)),
-                   slice(min(box[1].start, columns.start), max(box[1].stop, columns.stop)))
-    window = _window_around(box, mask.shape, smooth_sigma_px)
+            boxes.append((also_around, TARGETS_MARGIN_PX))
+    window = _window_around(boxes, mask.shape, smooth_sigma_px)
     if window is None:
         return SupportImage(recipe.values(None))
     region, valid = window
@@ -302,9 +302,14 @@ class _Recipe(NamedTuple):
         return _smooth(values, self.smooth_sigma_px)
 
 
-# Where a support is computed: the silhouette's box grown by this margin [px]. Samples of a tracked
-# body fall within it (a sample beyond costs the whole frame once for that view and frame).
-WINDOW_MARGIN_PX = 32
+# Where a support is computed: the silhouette's box grown by SILHOUETTE_MARGIN_PX, joined with the
+# box where the skeleton is expected (also_around: the tracker's projected targets) grown by
+# TARGETS_MARGIN_PX [px]. The skeleton lies around its targets, an elbow or a knee up to a limb's
+# length from them, and seldom far outside the silhouette; a sample beyond the window costs the
+# whole frame once for that view and frame. On the real-mocap benchmark a window of the silhouette's
+# box grown by 32 px alone was read outside 87 times at 16 px; this one (docs/method.md, "Stop 36").
+SILHOUETTE_MARGIN_PX = 8
+TARGETS_MARGIN_PX = 32
 # OpenCV blurs float images by vectors of columns and the last few columns of a row one by one,
 # which round differently; a window whose columns start on a multiple of this and that is a
 # multiple of it wide (or ends at the frame's edge) is blurred column for column as the frame is.
@@ -320,18 +325,20 @@ class _Window:
     column: int
 
 
-def _window_around(box: tuple[slice, slice], shape: tuple[int, int],
+def _window_around(boxes: list[tuple[tuple[slice, slice], int]], shape: tuple[int, int],
                    smooth_sigma_px: float) -> tuple[tuple[slice, slice], tuple[slice, slice]] | None:
-    """The region to compute a support on and the part of it that holds the whole frame's values
-    (the blur near the region's inner edges differs), or None when the region is the whole frame."""
+    """The region to compute a support on, around boxes each grown by its margin [px] ((box,
+    margin) pairs), and the part of it that holds the whole frame's values (the blur near the
+    region's inner edges differs), or None when the region is the whole frame."""
     height, width = shape
     # OpenCV's Gaussian kernel on float images reaches round(4 sigma) pixels; one more for safety.
     blur = int(np.ceil(4.0 * smooth_sigma_px)) + 1 if smooth_sigma_px > 0.0 else 0
-    reach = WINDOW_MARGIN_PX + blur
-    top, bottom = max(box[0].start - reach, 0), min(box[0].stop + reach, height)
-    left = max(box[1].start - reach, 0) // _BLUR_COLUMN_ALIGNMENT * _BLUR_COLUMN_ALIGNMENT
-    columns = box[1].stop + reach - left
-    right = min(left + -(-columns // _BLUR_COLUMN_ALIGNMENT) * _BLUR_COLUMN_ALIGNMENT, width)
+    top = max(min(rows.start - margin for (rows, _), margin in boxes) - blur, 0)
+    bottom = min(max(rows.stop + margin for (rows, _), margin in boxes) + blur, height)
+    first = min(columns.start - margin for (_, columns), margin in boxes) - blur
+    stop = max(columns.stop + margin for (_, columns), margin in boxes) + blur
+    left = max(first, 0) // _BLUR_COLUMN_ALIGNMENT * _BLUR_COLUMN_ALIGNMENT
+    right = min(left + -(-(stop - left) // _BLUR_COLUMN_ALIGNMENT) * _BLUR_COLUMN_ALIGNMENT, width)
     if (top, bottom, left, right) == (0, height, 0, width):
         return None
     valid = (slice(top + (blur if top > 0 else 0), bottom - (blur if bottom < height else 0)),
