@@ -9,7 +9,8 @@ import pytest
 from ibik_pin.exceptions import InputError
 from ibik_pin.vision.distance import box_around, distance_to_background, scan_mask, signed_distance
 from ibik_pin.vision.medial_axis import medial_axis_pixels
-from ibik_pin.vision.support import SILHOUETTE_MARGIN_PX, TARGETS_MARGIN_PX, SupportImage, support_from_mask
+from ibik_pin.vision.support import SupportImage, support_from_mask
+from ibik_pin.vision.support_window import SILHOUETTE_MARGIN_PX, TARGETS_MARGIN_PX
 
 
 def random_silhouettes(seed: int, count: int, size=(120, 160)):
@@ -196,6 +197,65 @@ def test_a_window_that_also_covers_a_box_reads_it_on_the_window_with_the_whole_f
             assert np.array_equal(support_from_mask(mask, 4.0, None, smooth_sigma_px, also_around=odd).values,
                                   reference.values)
     assert checked > 15
+
+
+@pytest.mark.parametrize("from_parts", [False, True])
+def test_a_read_outside_the_window_widens_it_around_the_read_with_the_whole_frames_values(from_parts):
+    """A read outside the window (a limb straying from a partial silhouette) asks for a window
+    that also covers it: computed around the read (the old window inside it), to the whole
+    frame's bits, the whole frame not computed; where a wider window would be the frame, the
+    frame. The same for a support rebuilt from its parts in another process."""
+    from ibik_pin.vision.support_parts import support_from_parts, windowed_parts
+
+    rng = np.random.default_rng(21)
+    widened = 0
+    for mask in random_silhouettes(seed=22, count=40, size=(480, 640)):
+        support = support_from_mask(mask, inside_cap_px=4.0)
+        if support._values is not None:  # a window as large as the frame
+            continue
+        if from_parts:
+            support = support_from_parts(windowed_parts(support))
+        reference = SupportImage(whole_frame_support(mask, 4.0, 1.0)).values
+        old, old_row, old_column = support.held_values()
+        row, column = int(rng.integers(0, 478)), int(rng.integers(0, 638))
+        covering = (slice(row, row + 2), slice(column, column + 2))
+        held, held_row, held_column = support.held_values(covering=covering)
+        if support._values is not None:  # the wider window would be the frame
+            assert (held_row, held_column) == (0, 0) and np.array_equal(held, reference)
+            continue
+        assert held_row <= row and row + 2 <= held_row + held.shape[0]
+        assert held_column <= column and column + 2 <= held_column + held.shape[1]
+        assert held_row <= old_row and old_row + old.shape[0] <= held_row + held.shape[0]
+        assert held_column <= old_column and old_column + old.shape[1] <= held_column + held.shape[1]
+        rows, columns = held.shape
+        assert np.array_equal(held, reference[held_row:held_row + rows, held_column:held_column + columns])
+        widened += held.size > old.size
+    assert widened > 15
+
+
+def test_the_overlap_term_reads_a_straying_sample_on_a_wider_window_not_the_whole_frame():
+    """The image term's value and gradient with a sample outside the support's window: those of
+    the whole frame's support, read on a window widened around the samples."""
+    from ibik_pin.configuration import Configuration
+    from ibik_pin.model import load_arm
+    from ibik_pin.tasks import ImageTask
+    from ibik_pin.tasks.image import View
+    from ibik_pin.vision.pinhole import look_at_camera
+
+    body = load_arm()
+    configuration = Configuration(body.model)
+    camera = look_at_camera("front", (640, 480), 500.0, eye=[0.0, -3.0, 0.0], target=[0.0, 0.0, 0.0],
+                            up=[0.0, 0.0, 1.0])
+    mask = np.zeros((480, 640), bool)
+    mask[20:60, 20:60] = True  # a silhouette in a corner: the arm's samples lie outside its window
+    whole = SupportImage(support_from_mask(mask, inside_cap_px=4.0).values)
+    windowed = support_from_mask(mask, inside_cap_px=4.0)
+    first_window = windowed.held_values()[0].shape
+    on_window, on_frame = ImageTask(body, [View(camera, windowed)]), ImageTask(body, [View(camera, whole)])
+    assert on_window.compute_value(configuration) == on_frame.compute_value(configuration)
+    np.testing.assert_array_equal(on_window.compute_gradient(configuration), on_frame.compute_gradient(configuration))
+    assert windowed._values is None  # a wider window, not the whole frame
+    assert windowed.held_values()[0].size > np.prod(first_window)
 
 
 # The near transform up to a 20 px reach, the separable one beyond.

@@ -28,7 +28,7 @@ from ibik_pin.model import BodyModel
 from ibik_pin.tasks.segments import SegmentCriterion, segment_ends
 from ibik_pin.vision.camera import CameraLike
 from ibik_pin.vision.candidate_kernels import moved_samples
-from ibik_pin.vision.kernels import pinhole_overlap_at_segments, support_overlap_at_segments, support_values
+from ibik_pin.vision.kernels import MIN_DEPTH, pinhole_overlap_at_segments, support_overlap_at_segments, support_values
 from ibik_pin.vision.support import SupportImageLike
 
 
@@ -158,7 +158,7 @@ class ImageTask(SegmentCriterion):
         projections = ([] if self._project is None else
                        self._project(self.sample_points(configuration)))
         for index, (view, (width, height)) in enumerate(zip(self._active_views, self._sizes, strict=True)):
-            for _ in range(2):  # the window around the body, unless a sample falls outside
+            for attempt in range(3):  # the window around the body; one wider, or the whole frame
                 values, row, column = self._held[index]
                 if pinholes is not None:
                     total, complete = pinhole_overlap_at_segments(
@@ -170,7 +170,9 @@ class ImageTask(SegmentCriterion):
                         self._sample_end, self._sample_fraction, gradient_frames)
                 if complete:
                     break
-                self._held[index] = view.support.held_values(whole_frame=True)
+                covering = (_covering(*self._pixels(self.sample_points(configuration))[index], width, height)
+                            if attempt == 0 else None)
+                self._held[index] = view.support.held_values(whole_frame=covering is None, covering=covering)
             value += total
         count = self._count
         self._cache = (value / count, configuration.velocity_gradient(self._frame_ids, gradient_frames, count))
@@ -289,8 +291,23 @@ def support_at(view: View, points: np.ndarray, behind: float = 0.0,
     pixels, depth = projected
     width, height = view.support.size
     read = np.empty(len(depth))
-    for whole_frame in (False, True):  # the window around the body, unless a point falls outside
-        values, row, column = view.support.held_values(whole_frame)
+    for attempt in range(3):  # the window around the body; one wider, or the whole frame
+        covering = _covering(pixels, depth, width, height) if attempt == 1 else None
+        values, row, column = view.support.held_values(whole_frame=attempt == 2 or (attempt == 1 and covering is None),
+                                                       covering=covering)
         if support_values(pixels, depth, values, row, column, width, height, float(behind), read):
             break
     return read
+
+
+def _covering(pixels: np.ndarray, depth: np.ndarray, width: int, height: int) -> tuple[slice, slice] | None:
+    """The (rows, columns) of the frame that reading a support at these projections (N, 2), (N,)
+    touches: each point in front of the camera, clipped to the frame, and its bilinear cell's
+    other corner (vision.kernels._read_support); None when no point is read."""
+    seen = (depth > MIN_DEPTH) & np.isfinite(pixels).all(axis=1)
+    if not seen.any():
+        return None
+    u = np.clip(pixels[seen, 0], 0.0, width - 1.0)
+    v = np.clip(pixels[seen, 1], 0.0, height - 1.0)
+    return (slice(min(int(v.min()), max(height - 2, 0)), min(int(v.max()) + 2, height)),
+            slice(min(int(u.min()), max(width - 2, 0)), min(int(u.max()) + 2, width)))

@@ -13,10 +13,8 @@ from __future__ import annotations
 import functools
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import NamedTuple, Protocol, cast
 
-import cv2
 import numpy as np
 
 from ibik_pin.checks import as_mask
@@ -26,10 +24,10 @@ from ibik_pin.vision.distance import (
     ScannedMask,
     inside_distance,
     scan_mask,
-    shifted,
     signed_distance,
 )
 from ibik_pin.vision.kernels import support_sample
+from ibik_pin.vision.support_window import TARGETS_MARGIN_PX, Recipe, Window, holds
 
 
 class SupportSample(NamedTuple):
@@ -62,9 +60,11 @@ class SupportImageLike(Protocol):
         """Values (N,) and gradient (N, 2) d values / d (u, v) at (N, 2) pixels [px]."""
         ...
 
-    def held_values(self, whole_frame: bool = False) -> tuple[np.ndarray, int, int]:
+    def held_values(self, whole_frame: bool = False,
+                    covering: tuple[slice, slice] | None = None) -> tuple[np.ndarray, int, int]:
         """The values computed so far, (h, w) float32, and the (row, column) of the frame where
-        they start; with `whole_frame`, the frame's (H, W) values from (0, 0)."""
+        they start; with `covering`, values that hold those pixels of the frame too; with
+        `whole_frame`, the frame's (H, W) values from (0, 0)."""
         ...
 
 
@@ -82,8 +82,9 @@ class SupportImage:
     """A support image of one view and whether the image term uses it.
 
     A support built from a silhouette (:func:`support_from_mask`) may hold its values on a window
-    around the body only: samples inside it, nearly all of them while tracking, are read there, and
-    the whole frame is computed the first time something reads outside it (the same values).
+    around the body only: samples inside it, nearly all of them while tracking, are read there; a
+    read outside it computes a wider window that holds what was read (held_values' `covering`), or
+    the whole frame (the same values either way).
 
     Attributes:
         values: (H, W) float32 support [support units], read-only.
@@ -105,19 +106,23 @@ class SupportImage:
         self._values: np.ndarray | None = values
         self._enabled = bool(enabled)
         self._size = (values.shape[1], values.shape[0])
-        self._window: _Window | None = None
+        self._window: Window | None = None
         self._whole_frame: Callable[[], np.ndarray] | None = None
-        self._recipe: _Recipe | None = None  # set by support_from_mask on a windowed support
+        self._wider: Callable[[Window, tuple[slice, slice]], Window | None] | None = None
+        self._recipe: Recipe | None = None  # set by support_from_mask on a windowed support
 
     @classmethod
-    def _windowed(cls, window: _Window, size: tuple[int, int], whole_frame: Callable[[], np.ndarray]) -> SupportImage:
-        """An enabled support known on `window`, the whole frame from `whole_frame()` when needed."""
+    def _windowed(cls, window: Window, size: tuple[int, int], whole_frame: Callable[[], np.ndarray],
+                  wider: Callable[[Window, tuple[slice, slice]], Window | None]) -> SupportImage:
+        """An enabled support known on `window`, the whole frame from `whole_frame()` when needed,
+        and `wider(window, covering)` a window that holds both (None: only the whole frame does)."""
         support = cls.__new__(cls)
         support._values = None
         support._enabled = True
         support._size = size
         support._window = window
         support._whole_frame = whole_frame
+        support._wider = wider
         support._recipe = None
         return support
 
@@ -126,7 +131,7 @@ class SupportImage:
         if self._values is None:
             values = cast(Callable[[], np.ndarray], self._whole_frame)()
             values.setflags(write=False)
-            self._values, self._whole_frame = values, None  # the mask it was computed from let go
+            self._values, self._whole_frame, self._wider = values, None, None  # the mask it was computed from let go
             self._recipe = None
         return self._values
 
@@ -134,12 +139,23 @@ class SupportImage:
     def enabled(self) -> bool:
         return self._enabled
 
-    def held_values(self, whole_frame: bool = False) -> tuple[np.ndarray, int, int]:
+    def held_values(self, whole_frame: bool = False,
+                    covering: tuple[slice, slice] | None = None) -> tuple[np.ndarray, int, int]:
         """The values computed so far, (h, w) float32, and the (row, column) of the frame where
-        they start: the window around the body until something reads outside it; with
-        `whole_frame` (or once computed), the frame's (H, W) values from (0, 0)."""
+        they start: the window around the body; with `covering` ((rows, columns) of the frame), a
+        window that also holds those pixels, computed wider if need be; with `whole_frame` (or once
+        computed, or where a wider window would be the frame), the frame's (H, W) values from (0, 0).
+
+        On the Pose2Sim video a tenth of the views read outside their window, each the whole frame
+        until covering was asked for: a wider window is a fraction of it (docs/method.md, "Stop 36").
+        """
         if self._values is None and not whole_frame:
-            window = cast(_Window, self._window)
+            window = cast(Window, self._window)
+            if covering is not None and not holds(window, covering) and self._wider is not None:
+                wider = self._wider(window, covering)
+                if wider is None:
+                    return self.values, 0, 0
+                window = self._window = wider
             return window.values, window.row, window.column
         return self.values, 0, 0
 
@@ -199,12 +215,6 @@ def _positive_or_none(value, name: str) -> float | None:
     if not np.isfinite(value) or value <= 0.0:
         raise InputError(f"{name}: expected a positive number of pixels or None, found {value}")
     return value
-
-
-def _smooth(values: np.ndarray, sigma_px: float) -> np.ndarray:
-    if sigma_px == 0.0:
-        return values
-    return cv2.GaussianBlur(values, (0, 0), sigmaX=sigma_px, sigmaY=sigma_px, borderType=cv2.BORDER_REPLICATE)
 
 
 def support_from_mask(
@@ -267,84 +277,19 @@ def support_from_mask(
         # The support reads the inside distance less half a pixel, capped (vision.distance.signed_distance).
         raise InputError(f"inside: its values are exact up to {inside.limit} px only, which an inside cap "
                          f"of {inside_cap_px} px exceeds (the cap must be at most limit - 0.5)")
-    recipe = _Recipe(mask, inside, inside_cap_px, outside_cap_px, smooth_sigma_px)
-    boxes = [(inside.silhouette_box, SILHOUETTE_MARGIN_PX)]
+    recipe = Recipe(mask, inside, inside_cap_px, outside_cap_px, smooth_sigma_px)
+    boxes = []
     if also_around is not None:
         rows, columns = also_around
-        if rows.start < rows.stop and columns.start < columns.stop:  # clipped to the frame by _window_around
+        if rows.start < rows.stop and columns.start < columns.stop:  # clipped to the frame by window_around
             boxes.append((also_around, TARGETS_MARGIN_PX))
-    window = _window_around(boxes, mask.shape, smooth_sigma_px)
+    window = recipe.window(boxes)
     if window is None:
         return SupportImage(recipe.values(None))
-    region, valid = window
-    values = np.ascontiguousarray(recipe.values(region)[shifted(valid, region)])  # read by flat indices
-    support = SupportImage._windowed(_Window(values, valid[0].start, valid[1].start), (mask.shape[1], mask.shape[0]),
-                                     functools.partial(recipe.values, None))
+    support = SupportImage._windowed(window, (mask.shape[1], mask.shape[0]), functools.partial(recipe.values, None),
+                                     recipe.wider)
     support._recipe = recipe
     return support
-
-
-class _Recipe(NamedTuple):
-    """What support_from_mask was given: what computes a windowed support's whole frame, here or
-    again in another process (vision.support_parts)."""
-
-    mask: np.ndarray
-    inside: InsideDistance
-    inside_cap_px: float | None
-    outside_cap_px: float | None
-    smooth_sigma_px: float
-
-    def values(self, region: tuple[slice, slice] | None) -> np.ndarray:
-        """The support's values on a region holding the silhouette's box (None: the whole frame), (h, w)."""
-        values = signed_distance(self.mask, region, inside=self.inside, inside_cap_px=self.inside_cap_px)
-        if self.outside_cap_px is not None:
-            np.maximum(values, -self.outside_cap_px, out=values)
-        return _smooth(values, self.smooth_sigma_px)
-
-
-# Where a support is computed: the silhouette's box grown by SILHOUETTE_MARGIN_PX, joined with the
-# box where the skeleton is expected (also_around: the tracker's projected targets) grown by
-# TARGETS_MARGIN_PX [px]. A sample beyond the window costs the whole frame once for that view and
-# frame. The silhouette's margin stays wide for partial silhouettes: on the Pose2Sim video
-# (experiments/pose2sim_video.py) 8 px instead of 32 took the whole frames read from 278 to 1134
-# and its IBIK runs' solves from 80-145 to 26-66 frames/s, where on the real-mocap benchmark it saved
-# a tenth of the windows' pixels (docs/method.md, "Stop 36").
-SILHOUETTE_MARGIN_PX = 32
-TARGETS_MARGIN_PX = 32
-# OpenCV blurs float images by vectors of columns and the last few columns of a row one by one,
-# which round differently; a window whose columns start on a multiple of this and that is a
-# multiple of it wide (or ends at the frame's edge) is blurred column for column as the frame is.
-_BLUR_COLUMN_ALIGNMENT = 32
-
-
-@dataclass(frozen=True)
-class _Window:
-    """A support's values (h, w) on the part of the frame from (row, column) on."""
-
-    values: np.ndarray
-    row: int
-    column: int
-
-
-def _window_around(boxes: list[tuple[tuple[slice, slice], int]], shape: tuple[int, int],
-                   smooth_sigma_px: float) -> tuple[tuple[slice, slice], tuple[slice, slice]] | None:
-    """The region to compute a support on, around boxes each grown by its margin [px] ((box,
-    margin) pairs), and the part of it that holds the whole frame's values (the blur near the
-    region's inner edges differs), or None when the region is the whole frame."""
-    height, width = shape
-    # OpenCV's Gaussian kernel on float images reaches round(4 sigma) pixels; one more for safety.
-    blur = int(np.ceil(4.0 * smooth_sigma_px)) + 1 if smooth_sigma_px > 0.0 else 0
-    top = max(min(rows.start - margin for (rows, _), margin in boxes) - blur, 0)
-    bottom = min(max(rows.stop + margin for (rows, _), margin in boxes) + blur, height)
-    first = min(columns.start - margin for (_, columns), margin in boxes) - blur
-    stop = max(columns.stop + margin for (_, columns), margin in boxes) + blur
-    left = max(first, 0) // _BLUR_COLUMN_ALIGNMENT * _BLUR_COLUMN_ALIGNMENT
-    right = min(left + -(-(stop - left) // _BLUR_COLUMN_ALIGNMENT) * _BLUR_COLUMN_ALIGNMENT, width)
-    if (top, bottom, left, right) == (0, height, 0, width):
-        return None
-    valid = (slice(top + (blur if top > 0 else 0), bottom - (blur if bottom < height else 0)),
-             slice(left + (blur if left > 0 else 0), right - (blur if right < width else 0)))
-    return (slice(top, bottom), slice(left, right)), valid
 
 
 def obstacle_support(object_mask: np.ndarray, influence_px: float) -> SupportImage:

@@ -3,9 +3,8 @@
 tracking.image_process prepares each frame's supports in a child process and sends them through
 shared memory: a support that support_from_mask holds on a window around the body travels as its
 window's values, the silhouette bit-packed and its inside distance (support_from_mask's
-vision.distance.InsideDistance), from which a read outside the window computes the same whole frame
-in the parent as in the child, at the same cost (on the real video with background-subtracted
-silhouettes, about half the views are read outside their window).
+vision.distance.InsideDistance), from which a read outside the window computes the same wider window
+or whole frame in the parent as in the child, at the same cost.
 """
 
 from __future__ import annotations
@@ -17,7 +16,8 @@ import numpy as np
 
 from ibik_pin.exceptions import InputError
 from ibik_pin.vision.distance import InsideDistance
-from ibik_pin.vision.support import SupportImage, _Recipe, _Window
+from ibik_pin.vision.support import SupportImage
+from ibik_pin.vision.support_window import Recipe, Window
 
 __all__ = ["WindowedParts", "support_from_parts", "windowed_parts"]
 
@@ -57,7 +57,7 @@ def windowed_parts(support: SupportImage) -> WindowedParts | None:
     recipe = support._recipe
     if recipe is None or support._values is not None:
         return None
-    window = cast(_Window, support._window)
+    window = cast(Window, support._window)
     return WindowedParts(window.values, window.row, window.column, support.size, np.packbits(recipe.mask),
                          recipe.inside.values, _box(recipe.inside.box), _box(recipe.inside.silhouette_box),
                          recipe.inside.limit, recipe.inside_cap_px, recipe.outside_cap_px, recipe.smooth_sigma_px)
@@ -70,14 +70,25 @@ def support_from_parts(parts: WindowedParts) -> SupportImage:
     if values.dtype != np.float32 or not values.flags.c_contiguous:
         raise InputError(f"values: expected a C-ordered float32 window, found {values.dtype}")
     values.setflags(write=False)
-    return SupportImage._windowed(_Window(values, parts.row, parts.column), parts.size,
-                                  functools.partial(_whole_frame_of_parts, parts))
+    return SupportImage._windowed(Window(values, parts.row, parts.column), parts.size,
+                                  functools.partial(_whole_frame_of_parts, parts),
+                                  functools.partial(_wider_of_parts, parts))
 
 
-def _whole_frame_of_parts(parts: WindowedParts) -> np.ndarray:
-    """The whole frame as support_from_mask's own windowed support computes it."""
+def _recipe_of_parts(parts: WindowedParts) -> Recipe:
+    """What support_from_mask computed the support from, again."""
     width, height = parts.size
     mask = np.unpackbits(parts.mask_bits, count=width * height).reshape(height, width).view(bool)
     inside = InsideDistance(parts.inside_values, _slices(parts.inside_box), _slices(parts.silhouette_box),
                             parts.inside_limit)
-    return _Recipe(mask, inside, parts.inside_cap_px, parts.outside_cap_px, parts.smooth_sigma_px).values(None)
+    return Recipe(mask, inside, parts.inside_cap_px, parts.outside_cap_px, parts.smooth_sigma_px)
+
+
+def _whole_frame_of_parts(parts: WindowedParts) -> np.ndarray:
+    """The whole frame as support_from_mask's own windowed support computes it."""
+    return _recipe_of_parts(parts).values(None)
+
+
+def _wider_of_parts(parts: WindowedParts, window: Window, covering: tuple[slice, slice]) -> Window | None:
+    """A wider window as support_from_mask's own windowed support computes it."""
+    return _recipe_of_parts(parts).wider(window, covering)
