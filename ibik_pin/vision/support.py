@@ -241,9 +241,9 @@ def support_from_mask(
             one computed with a `limit` needs an inside cap of at most limit - 0.5 px.
         also_around: (rows, columns) of the frame that the window of computed values covers besides
             the silhouette, with a wider margin (where the skeleton is expected: the tracker's
-            projected targets; SILHOUETTE_MARGIN_PX, TARGETS_MARGIN_PX). A read outside the window
-            computes the whole frame, which costs most where silhouettes are partial (background
-            subtraction keeps the moving limbs).
+            projected targets; vision.support_window's margins). A read outside the window
+            computes a wider one around it, which happens most where silhouettes are partial
+            (background subtraction keeps the moving limbs).
 
     Returns:
         The support [px]. An empty mask gives zeros with ``enabled=False`` and an

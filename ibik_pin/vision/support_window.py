@@ -66,11 +66,11 @@ class Recipe(NamedTuple):
 
 # Where a support is computed: the silhouette's box grown by SILHOUETTE_MARGIN_PX, joined with the
 # box where the skeleton is expected (also_around: the tracker's projected targets) grown by
-# TARGETS_MARGIN_PX [px]. A sample beyond the window costs the whole frame once for that view and
-# frame. The silhouette's margin stays wide for partial silhouettes: on the Pose2Sim video
-# (experiments/pose2sim_video.py) 8 px instead of 32 took the whole frames read from 278 to 1134
-# and its IBIK runs' solves from 80-145 to 26-66 frames/s, where on the real-mocap benchmark it saved
-# a tenth of the windows' pixels (docs/method.md, "Stop 36").
+# TARGETS_MARGIN_PX [px]. A sample beyond the window costs a wider window (Recipe.wider). The
+# silhouette's margin stays wide for partial silhouettes: on the Pose2Sim video
+# (experiments/pose2sim_video.py) 8 px instead of 32 took the whole frames then read from 278 to
+# 1134 and its IBIK runs' solves from 80-145 to 26-66 frames/s, where on the real-mocap benchmark
+# it saved a tenth of the windows' pixels (docs/method.md, "Stop 36").
 SILHOUETTE_MARGIN_PX = 32
 TARGETS_MARGIN_PX = 32
 # OpenCV blurs float images by vectors of columns and the last few columns of a row one by one,
