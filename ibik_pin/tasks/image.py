@@ -30,6 +30,7 @@ from ibik_pin.vision.camera import CameraLike
 from ibik_pin.vision.candidate_kernels import moved_samples
 from ibik_pin.vision.kernels import MIN_DEPTH, pinhole_overlap_at_segments, support_overlap_at_segments, support_values
 from ibik_pin.vision.support import SupportImageLike
+from ibik_pin.vision.support_window import read_box
 
 
 @dataclass
@@ -291,23 +292,16 @@ def support_at(view: View, points: np.ndarray, behind: float = 0.0,
     pixels, depth = projected
     width, height = view.support.size
     read = np.empty(len(depth))
+    held = view.support.held_values()
     for attempt in range(3):  # the window around the body; one wider, or the whole frame
-        covering = _covering(pixels, depth, width, height) if attempt == 1 else None
-        values, row, column = view.support.held_values(whole_frame=attempt == 2 or (attempt == 1 and covering is None),
-                                                       covering=covering)
-        if support_values(pixels, depth, values, row, column, width, height, float(behind), read):
+        if support_values(pixels, depth, *held, width, height, float(behind), read):
             break
+        covering = _covering(pixels, depth, width, height) if attempt == 0 else None
+        held = view.support.held_values(whole_frame=covering is None, covering=covering)
     return read
 
 
 def _covering(pixels: np.ndarray, depth: np.ndarray, width: int, height: int) -> tuple[slice, slice] | None:
-    """The (rows, columns) of the frame that reading a support at these projections (N, 2), (N,)
-    touches: each point in front of the camera, clipped to the frame, and its bilinear cell's
-    other corner (vision.kernels._read_support); None when no point is read."""
-    seen = (depth > MIN_DEPTH) & np.isfinite(pixels).all(axis=1)
-    if not seen.any():
-        return None
-    u = np.clip(pixels[seen, 0], 0.0, width - 1.0)
-    v = np.clip(pixels[seen, 1], 0.0, height - 1.0)
-    return (slice(min(int(v.min()), max(height - 2, 0)), min(int(v.max()) + 2, height)),
-            slice(min(int(u.min()), max(width - 2, 0)), min(int(u.max()) + 2, width)))
+    """What reading a support at these projections (N, 2), (N,) touches (read_box) of the points
+    in front of the camera (NaN pixels read nothing)."""
+    return read_box(pixels[(depth > MIN_DEPTH) & np.isfinite(pixels).all(axis=1)], width, height)

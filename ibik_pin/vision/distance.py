@@ -262,7 +262,7 @@ def _transform(image, to_set, column_limit, half):
                 offset = g * g + p * p
                 numerator, denominator = np.int64(0), np.int64(0)
                 while count > 0:
-                    # The new parabola starts below the last one's start: that one is never the lowest.
+                    # The last parabola is dropped while the new one starts at or before its start.
                     numerator, denominator = offset - offsets[count - 1], 2 * (p - apexes[count - 1])
                     if (denominators[count - 1] == 0
                             or numerator * denominators[count - 1] > numerators[count - 1] * denominator):

@@ -27,7 +27,7 @@ from ibik_pin.vision.distance import (
     signed_distance,
 )
 from ibik_pin.vision.kernels import support_sample
-from ibik_pin.vision.support_window import TARGETS_MARGIN_PX, Recipe, Window, holds
+from ibik_pin.vision.support_window import TARGETS_MARGIN_PX, Recipe, Window, holds, read_box
 
 
 class SupportSample(NamedTuple):
@@ -201,10 +201,12 @@ class SupportImage:
         """
         pixels = _as_pixels(pixels)
         values, gradient = np.empty(len(pixels)), np.empty((len(pixels), 2))
-        for whole_frame in (False, True):  # the window around the body, unless a pixel falls outside
-            held, row, column = self.held_values(whole_frame)
-            if support_sample(pixels, held, row, column, *self.size, values, gradient):
+        held = self.held_values()
+        for attempt in range(3):  # the window around the body; one wider, or the whole frame
+            if support_sample(pixels, *held, *self.size, values, gradient):
                 break
+            covering = read_box(pixels, *self.size) if attempt == 0 else None
+            held = self.held_values(whole_frame=covering is None, covering=covering)
         return SupportSample(values, gradient)
 
 

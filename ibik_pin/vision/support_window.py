@@ -17,7 +17,8 @@ import numpy as np
 
 from ibik_pin.vision.distance import InsideDistance, shifted, signed_distance
 
-__all__ = ["SILHOUETTE_MARGIN_PX", "TARGETS_MARGIN_PX", "Recipe", "Window", "holds", "smooth", "window_around"]
+__all__ = ["SILHOUETTE_MARGIN_PX", "TARGETS_MARGIN_PX", "Recipe", "Window", "holds", "read_box", "smooth",
+           "window_around"]
 
 
 def smooth(values: np.ndarray, sigma_px: float) -> np.ndarray:
@@ -93,6 +94,19 @@ def holds(window: Window, box: tuple[slice, slice]) -> bool:
     rows, columns = window.values.shape
     return (window.row <= box[0].start and box[0].stop <= window.row + rows
             and window.column <= box[1].start and box[1].stop <= window.column + columns)
+
+
+def read_box(pixels: np.ndarray, width: int, height: int) -> tuple[slice, slice] | None:
+    """The (rows, columns) of a frame (width, height) that bilinear reads at pixels (N, 2) [px]
+    touch: each pixel clipped to the frame, and its cell's other corner (vision.kernels'
+    _read_support); None for no pixel. What a support asked to cover a read outside its window
+    must hold (SupportImage.held_values)."""
+    if len(pixels) == 0:
+        return None
+    u = np.clip(pixels[:, 0], 0.0, width - 1.0)
+    v = np.clip(pixels[:, 1], 0.0, height - 1.0)
+    return (slice(min(int(v.min()), max(height - 2, 0)), min(int(v.max()) + 2, height)),
+            slice(min(int(u.min()), max(width - 2, 0)), min(int(u.max()) + 2, width)))
 
 
 def window_around(boxes: list[tuple[tuple[slice, slice], int]], shape: tuple[int, int],
