@@ -21,6 +21,7 @@ from ibik_pin.solvers.projection import (
     LiegeoisSolver,
     PriorityStackSolver,
 )
+from ibik_pin.solvers.status import LevelStatus
 from ibik_pin.solvers.step_adaptation import StepAdaptation
 
 SOLVERS = {
@@ -49,7 +50,7 @@ def make_solver(name: str, *, limits: JointLimits | None = None, damping: float 
 
 
 __all__ = [
-    "Solver", "StepResult", "SolveResult", "LevelReport", "StepAdaptation", "SOLVERS", "make_solver",
+    "Solver", "StepResult", "SolveResult", "LevelReport", "LevelStatus", "StepAdaptation", "SOLVERS", "make_solver",
     "DEFAULT_DAMPING",
     "DampedLeastSquaresSolver", "LiegeoisSolver", "PriorityStackSolver", "HierarchicalQPSolver",
 ]

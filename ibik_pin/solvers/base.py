@@ -15,7 +15,7 @@ from __future__ import annotations
 import itertools
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Sequence, Set
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -24,6 +24,7 @@ from ibik_pin.checks import all_finite
 from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError, SolverError
 from ibik_pin.limits import JointLimits
+from ibik_pin.solvers.status import LevelStatus
 from ibik_pin.solvers.step_adaptation import StepAdaptation
 from ibik_pin.tasks.base import GradientTask, Task
 
@@ -72,15 +73,16 @@ class LevelReport:
         kind: "tasks" (least squares) or "gradient".
         residual: |A dq - b| of a least-squares level after the step (NaN for a gradient level).
         value: the criterion h(q) of a gradient level before the step (NaN otherwise).
-        status: "solved"; "relaxed" (least-squares optimum with a residual: unreachable under the
-            higher levels or the limits); "failed" (the QP backend failed: the level was skipped);
-            "empty" (no enabled task, no null space left, or a zero gradient).
+        status: the level's LevelStatus (each member's `definition` says what it means).
+        detail: the QP backend's own status when the level failed (e.g. "proxsuite:
+            PROXQP_MAX_ITER_REACHED"), else "".
     """
 
     kind: str
     residual: float
     value: float
-    status: str
+    status: LevelStatus
+    detail: str = ""
 
 
 class StepResult:
@@ -207,25 +209,28 @@ def build_levels(configuration: Configuration, levels: Levels, plan: LevelPlan |
     return built
 
 
-def least_squares_status(residual: float, b: np.ndarray) -> str:
-    """"solved" when the residual is small next to the requested change (damping alone leaves
-    lambda^2 / (sigma^2 + lambda^2) of it), else "relaxed"."""
-    return "solved" if residual <= 1e-6 + 0.05 * vector_norm(b) else "relaxed"
+def least_squares_status(residual: float, b: np.ndarray) -> LevelStatus:
+    """SOLVED when the residual is small next to the requested change (damping alone leaves
+    lambda^2 / (sigma^2 + lambda^2) of it), else RELAXED."""
+    return LevelStatus.SOLVED if residual <= 1e-6 + 0.05 * vector_norm(b) else LevelStatus.RELAXED
 
 
-def report_levels(built: list, dq: np.ndarray, failed: Set[int] = frozenset()) -> list[LevelReport]:
-    """Reports of every level for the step dq."""
+def report_levels(built: list, dq: np.ndarray, failed: Mapping[int, str] | None = None) -> list[LevelReport]:
+    """Reports of every level for the step dq; `failed`: the levels whose QP failed, each with its
+    backend's status."""
+    failed = failed or {}
     reports = []
     for index, level in enumerate(built):
         if level is None:
-            reports.append(LevelReport("tasks", float("nan"), float("nan"), "empty"))
+            reports.append(LevelReport("tasks", float("nan"), float("nan"), LevelStatus.EMPTY))
         elif isinstance(level, GradientLevel):
-            status = "failed" if index in failed else ("empty" if level.step_size == 0 else "solved")
-            reports.append(LevelReport("gradient", float("nan"), level.value, status))
+            status = (LevelStatus.FAILED if index in failed else
+                      LevelStatus.EMPTY if level.step_size == 0 else LevelStatus.SOLVED)
+            reports.append(LevelReport("gradient", float("nan"), level.value, status, failed.get(index, "")))
         else:
             residual = vector_norm(level.A @ dq - level.b)
-            status = "failed" if index in failed else least_squares_status(residual, level.b)
-            reports.append(LevelReport("tasks", residual, float("nan"), status))
+            status = LevelStatus.FAILED if index in failed else least_squares_status(residual, level.b)
+            reports.append(LevelReport("tasks", residual, float("nan"), status, failed.get(index, "")))
     return reports
 
 
@@ -327,5 +332,5 @@ class Solver(ABC):
             levels=step.levels,
             step_norms=np.array(step_norms),
             limit_violation=violation,
-            failed_levels=sum(report.status == "failed" for report in step.levels),
+            failed_levels=sum(report.status is LevelStatus.FAILED for report in step.levels),
         )

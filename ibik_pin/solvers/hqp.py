@@ -111,7 +111,7 @@ class HierarchicalQPSolver(Solver):
         packed = self._workspace.packed(built, plan, self.step_adaptation, nv)
         # From no step, clipped into the bounds (a q outside its limits steps back in first).
         dq, null_basis = self._workspace.zeros(nv), self._workspace.identity(nv)
-        failed: set[int] = set()
+        failed: dict[int, str] = {}
         start = 0
         while start < len(built):
             dq, null_basis, stopped, hessian, linear, remaining = packed.solve(
@@ -122,7 +122,7 @@ class HierarchicalQPSolver(Solver):
             # The active-set method did not end on this level (or is switched off): proxsuite's turn.
             w = self._solve_level(stopped, hessian, linear, null_basis, lower - dq, upper - dq)
             if w is None:
-                failed.add(stopped)  # skipped: its null space is left to the levels below
+                failed[stopped] = "proxsuite: no solution"  # skipped: its null space is left to the levels below
             else:
                 # proxsuite meets the bounds to eps_abs; clip so the limits hold exactly.
                 dq = (dq + null_basis @ w).clip(lower, upper)
