@@ -44,8 +44,8 @@ from realdata.clips import CLIPS, RATE_HZ
 from realdata.inputs import CONDITIONS, prepare_inputs
 from realdata.runner import DEFAULT_DATA, REPOSITORY, Variant, run_variant
 
+from ibik_pin.human import load_human
 from ibik_pin.limits import JointLimits
-from ibik_pin.model import load_human
 from ibik_pin.tracking.stack import Stack
 
 LOWER_BODY = ["Hip", "LHip", "RHip", "LKnee", "RKnee", "LAnkle", "RAnkle", "LBigToe", "LSmallToe", "LHeel",

@@ -29,9 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ibik_pin.human import load_human
 from ibik_pin.io.asf_amc import read_asf_amc
 from ibik_pin.io.trc import read_trc
-from ibik_pin.model import load_human
 from ibik_pin.subject.calibration import calibrate_subject
 from ibik_pin.synthetic.mocap import keypoints_from_motion
 

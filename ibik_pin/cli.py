@@ -160,7 +160,7 @@ def _calibrate(arguments: argparse.Namespace) -> None:
     """`ibik calibrate`: fit the subject on the static trial, write its URDF and figures, print them."""
 
     from ibik_pin.exceptions import IbikWarning
-    from ibik_pin.model import load_human
+    from ibik_pin.human import load_human
     from ibik_pin.subject.calibration import calibrate_static_trial, parse_frame_range
     from ibik_pin.subject.calibration_result import write_calibration_figures
     from ibik_pin.subject.urdf import write_subject_urdf

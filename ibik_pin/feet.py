@@ -8,16 +8,13 @@ swivel the knee the image is there to place.
 from __future__ import annotations
 
 import xml.etree.ElementTree as ElementTree
-from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
 
 from ibik_pin.exceptions import FileFormatError
 from ibik_pin.io.urdf import urdf_numbers, urdf_origin
-
-if TYPE_CHECKING:  # model imports this module to build the human
-    from ibik_pin.model import BodyModel
+from ibik_pin.model import BodyModel
 
 __all__ = ["FOOT_POINT_SIDES", "FOOT_ROTATION_LIMIT_RAD", "add_foot_rotation", "foot_point_joints"]
 

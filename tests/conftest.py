@@ -11,8 +11,8 @@ import pinocchio as pin
 import pytest
 
 from ibik_pin.configuration import Configuration
+from ibik_pin.human import load_human
 from ibik_pin.limits import JointLimits
-from ibik_pin.model import load_human
 
 
 @pytest.fixture(scope="session")

@@ -11,8 +11,8 @@ import pytest
 
 from ibik_pin.cli import main
 from ibik_pin.exceptions import InputError, UnknownNameError
+from ibik_pin.human import human_urdf_path, load_human
 from ibik_pin.io.trc import TrcData, write_trc
-from ibik_pin.model import human_urdf_path, load_human
 from ibik_pin.subject.calibration import (
     JOINT_CENTRE_KEYPOINTS,
     SCALE_GROUPS,

@@ -247,7 +247,7 @@ def test_a_failed_run_leaves_a_previous_outdir_untouched(dataset, tmp_path, caps
 
 
 def test_another_urdf_with_the_human_joint_names_is_accepted(dataset, tmp_path):
-    from ibik_pin.model import human_urdf_path
+    from ibik_pin.human import human_urdf_path
 
     urdf = tmp_path / "my_human.urdf"
     urdf.write_text(human_urdf_path().read_text())

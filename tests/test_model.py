@@ -4,15 +4,8 @@ import pytest
 
 from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import FileFormatError, IbikError, InputError, UnknownNameError
-from ibik_pin.model import (
-    human_urdf_path,
-    load_arm,
-    load_human,
-    load_leg,
-    load_planar_chain,
-    load_urdf,
-    set_segment_length,
-)
+from ibik_pin.human import human_urdf_path, load_human
+from ibik_pin.model import load_arm, load_leg, load_planar_chain, load_urdf, set_segment_length
 
 
 def test_the_human_comes_from_the_installed_example_robot_data():

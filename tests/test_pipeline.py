@@ -16,9 +16,9 @@ import pytest
 
 from ibik_pin.cli import main
 from ibik_pin.exceptions import IbikWarning
+from ibik_pin.human import load_human
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD
 from ibik_pin.io.trc import read_trc, write_trc
-from ibik_pin.model import load_human
 from ibik_pin.synthetic.dataset import write_dataset
 from ibik_pin.synthetic.rig import humaneva_rig
 

@@ -6,13 +6,13 @@ import pinocchio as pin
 import pytest
 
 from ibik_pin.exceptions import IbikWarning, InputError, UnknownNameError
+from ibik_pin.human import HUMAN_END_EFFECTORS, load_human
 from ibik_pin.io.asf_amc import read_asf_amc
 from ibik_pin.io.bvh import CMU_BVH_SCALE, read_bvh
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, read_calibration
 from ibik_pin.io.masks import list_mask_files, read_mask
 from ibik_pin.io.trc import read_trc
 from ibik_pin.limits import JointLimits
-from ibik_pin.model import HUMAN_END_EFFECTORS, load_human
 from ibik_pin.subject.scaling import scale_human, segment_lengths_from_keypoints
 from ibik_pin.synthetic.dataset import write_dataset
 from ibik_pin.synthetic.defects import SilhouetteDefects, apply_defects

@@ -30,11 +30,12 @@ import pinocchio as pin
 from ibik_pin.configuration import Configuration
 from ibik_pin.evaluation import ESTIMATED
 from ibik_pin.exceptions import EmptySilhouetteWarning
+from ibik_pin.human import load_human
 from ibik_pin.io.asf_amc import read_asf_amc
 from ibik_pin.io.bvh import CMU_BVH_SCALE, read_bvh
 from ibik_pin.io.skeleton import SkeletonMotion
 from ibik_pin.limits import JointLimits
-from ibik_pin.model import BodyModel, load_arm, load_human, load_leg, set_segment_length
+from ibik_pin.model import BodyModel, load_arm, load_leg, set_segment_length
 from ibik_pin.solvers import make_solver
 from ibik_pin.subject.scaling import scale_human, segment_lengths_from_keypoints
 from ibik_pin.synthetic.defects import SilhouetteDefects, apply_defects

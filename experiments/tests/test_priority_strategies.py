@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import priority_strategies as experiment
 
-from ibik_pin.model import load_human
+from ibik_pin.human import load_human
 from ibik_pin.tracking.stack import Stack
 
 

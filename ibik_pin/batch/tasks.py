@@ -60,7 +60,7 @@ def calibrate_subject_once(static: Path, model: Path | None, urdf: Path) -> Subj
     """
     if urdf.is_file():
         return SubjectOutcome(urdf)
-    from ibik_pin.model import load_human
+    from ibik_pin.human import load_human
     from ibik_pin.subject.calibration import calibrate_static_trial
     from ibik_pin.subject.urdf import write_subject_urdf
 

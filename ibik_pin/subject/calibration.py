@@ -192,7 +192,7 @@ def calibrate_subject(
     """Fit segment scales, keypoint placements and poses to a static trial.
 
     Args:
-        body: the human (:func:`~ibik_pin.model.load_human`), not modified and not a calibrated
+        body: the human (:func:`~ibik_pin.human.load_human`), not modified and not a calibrated
             subject already; its keypoints must be operational frames.
         names: the K keypoint names of the trial, all known to the body.
         positions: shape (F, K, 3) or (K, 3) [m], in any world frame (the root pose is fitted);

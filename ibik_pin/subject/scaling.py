@@ -253,7 +253,7 @@ def scale_human(body: BodyModel, lengths: Mapping[str, float]) -> BodyModel:
     quadratic in the move, solved in closed form). The segment radii are scaled by the mean ratio.
 
     Args:
-        body: example-robot-data's human from :func:`~ibik_pin.model.load_human` (or a URDF with
+        body: example-robot-data's human from :func:`~ibik_pin.human.load_human` (or a URDF with
             the same joint names); not modified (its Pinocchio model is deep-copied).
         lengths: length name -> length [m], names from :data:`LENGTH_KEYPOINTS`; e.g. the output of
             :func:`segment_lengths_from_keypoints`.

@@ -5,7 +5,7 @@ by default): every joint origin takes the body's placement, each link's visuals,
 centre of mass are scaled like the segment it belongs to (masses and rotational inertias are kept:
 the model is used for kinematics), and each keypoint becomes a massless link
 ``keypoint_<Name>`` fixed to its parent joint's link, so Pinocchio and any URDF viewer show it.
-:func:`~ibik_pin.model.load_human` reads those links back as the keypoints, and a body with
+:func:`~ibik_pin.human.load_human` reads those links back as the keypoints, and a body with
 keypoint links is a calibrated subject that tracking does not scale again.
 
 Mesh paths: ``package://`` and relative file names of the source are written as absolute
@@ -23,13 +23,14 @@ import numpy as np
 import pinocchio as pin
 
 from ibik_pin.exceptions import FileFormatError, InputError
+from ibik_pin.human import KEYPOINT_LINK_PREFIX, human_urdf_path, human_urdf_tree
 from ibik_pin.io.urdf import urdf_numbers, urdf_origin
-from ibik_pin.model import KEYPOINT_LINK_PREFIX, BodyModel, human_urdf_path, human_urdf_tree
+from ibik_pin.model import BodyModel
 
 __all__ = ["write_subject_urdf"]
 
 _HEADER = (" ibik_pin calibrated subject. Links named {prefix}<Name> are the calibrated keypoints, fixed "
-           "to their segments; ibik_pin.model.load_human reads them back and tracking does not re-scale "
+           "to their segments; ibik_pin.human.load_human reads them back and tracking does not re-scale "
            "this model. Written from {source}. ")
 
 
@@ -37,7 +38,7 @@ def write_subject_urdf(body: BodyModel, path: str | Path) -> list[str]:
     """Write the body as a URDF with one fixed link per keypoint.
 
     Args:
-        body: a human loaded by :func:`~ibik_pin.model.load_human` (scaled or calibrated); its
+        body: a human loaded by :func:`~ibik_pin.human.load_human` (scaled or calibrated); its
             joint names must be the source URDF's.
         path: the URDF to write (its folder is created).
 

@@ -21,9 +21,9 @@ import numpy as np
 
 from ibik_pin.evaluation import ESTIMATED
 from ibik_pin.exceptions import InputError
+from ibik_pin.human import load_human
 from ibik_pin.io.asf_amc import read_asf_amc
 from ibik_pin.io.trc import TrcData, read_trc, write_trc
-from ibik_pin.model import load_human
 from ibik_pin.subject.scaling import scale_human, segment_lengths_from_keypoints
 from ibik_pin.synthetic.dataset import write_dataset
 from ibik_pin.synthetic.mocap import keypoints_from_motion, pose_model_to_keypoints

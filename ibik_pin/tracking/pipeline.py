@@ -20,12 +20,13 @@ from tqdm import tqdm
 
 from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import FileFormatError, IbikWarning, InputError
+from ibik_pin.human import load_human, with_hip_at_hip_joints_midpoint
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, read_calibration
 from ibik_pin.io.export import write_model_bvh, write_model_mot, write_q_csv
 from ibik_pin.io.osim import write_osim_model
 from ibik_pin.io.trc import METRES_PER_UNIT, TrcData, read_trc, write_trc
 from ibik_pin.io.video import VideoReader
-from ibik_pin.model import BodyModel, load_human, with_hip_at_hip_joints_midpoint
+from ibik_pin.model import BodyModel
 from ibik_pin.subject.scaling import (
     FOOT_KEYPOINTS,
     scale_from_stature,
@@ -303,7 +304,7 @@ def write_outputs(folder: Path, job: TrackJob, trc: TrcData, body: BodyModel, ca
     the target values dropped as outliers, listed in report.json.
 
     Without a Hip target, the written Hip is HALPE_26's (Pose2Sim's): the midpoint of the hip
-    joints, not the model's root above it (model.with_hip_at_hip_joints_midpoint)."""
+    joints, not the model's root above it (human.with_hip_at_hip_joints_midpoint)."""
     if "Hip" not in trc.marker_names and "Hip" in body.keypoints:
         body = with_hip_at_hip_joints_midpoint(body)
         hip = result.keypoint_names.index("Hip")
