@@ -12,8 +12,9 @@ import pinocchio as pin
 import pytest
 
 from ibik_pin.exceptions import IbikError, InputError
+from ibik_pin.readahead.frame_images import frame_images
+from ibik_pin.readahead.frames_ahead import READ_AHEAD_MODES, FrameImagesAhead
 from ibik_pin.synthetic.silhouettes import render_silhouettes
-from ibik_pin.tracking.frame_images import READ_AHEAD_MODES, FrameImagesAhead, frame_images
 from ibik_pin.vision.medial_axis import medial_axis_pixels
 from ibik_pin.vision.pinhole import look_at_camera
 from ibik_pin.vision.support import support_from_mask
@@ -42,7 +43,7 @@ def rig(human):
 
 class Source:
     """A silhouette source that records which frames were read, and by which process and thread;
-    its records come back from a child process (tracking.image_process.FrameRecords)."""
+    its records come back from a child process (readahead.image_process.FrameRecords)."""
 
     def __init__(self, masks, failing_frame: int | None = None) -> None:
         self.masks, self.failing_frame = masks, failing_frame
@@ -208,7 +209,7 @@ def test_the_child_gets_far_ahead_while_the_first_frame_is_solved_and_its_jobs_f
     while it is that far ahead still read their own frames' images."""
     import time
 
-    from ibik_pin.tracking.image_process import MAX_SLOTS, MIN_SLOTS
+    from ibik_pin.readahead.image_process import MAX_SLOTS, MIN_SLOTS
 
     cameras, masks = rig
     frames = MAX_SLOTS + 8
@@ -414,7 +415,7 @@ def test_a_parent_waiting_on_a_slower_child_prepares_frames_the_child_has_not_re
     figures of every frame end up in the parent's reader, none read again for the report."""
     import time
 
-    from ibik_pin.tracking.image_process import MAX_SLOTS
+    from ibik_pin.readahead.image_process import MAX_SLOTS
     from ibik_pin.tracking.video_inputs import SilhouetteQualityReader
 
     cameras, masks = rig
@@ -465,7 +466,7 @@ def test_a_frame_the_parent_claimed_fails_at_its_own_frame(rig):
     raised when that frame is asked, as the child's are, after every frame before it."""
     import time
 
-    from ibik_pin.tracking.image_process import MAX_SLOTS
+    from ibik_pin.readahead.image_process import MAX_SLOTS
 
     cameras, masks = rig
     frames = MAX_SLOTS + 8

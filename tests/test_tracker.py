@@ -112,7 +112,7 @@ def test_level_outcomes_computed_in_the_image_process_are_those_computed_in_the_
                                                                                           monkeypatch):
     """The child's copy of the tracker, set as the frame had it (its targets, one dropped; its
     images; a posture on the previous frame), gives every frame's level outcomes to the bit."""
-    from ibik_pin.tracking.image_process import ImageProcess
+    from ibik_pin.readahead.image_process import ImageProcess
     from ibik_pin.tracking.stack import Stack
 
     motion, targets = sequence
@@ -271,7 +271,7 @@ def test_a_slow_image_process_and_its_claimed_frames_give_the_motion_and_outcome
     import os
     import time
 
-    from ibik_pin.tracking.image_process import MAX_SLOTS, ImageProcess
+    from ibik_pin.readahead.image_process import MAX_SLOTS, ImageProcess
 
     frames = 2 * MAX_SLOTS + 8
     rng = np.random.default_rng(5)

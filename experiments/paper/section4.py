@@ -36,6 +36,8 @@ from ibik_pin.io.bvh import CMU_BVH_SCALE, read_bvh
 from ibik_pin.io.skeleton import SkeletonMotion
 from ibik_pin.limits import JointLimits
 from ibik_pin.model import BodyModel, load_arm, load_leg, set_segment_length
+from ibik_pin.readahead.frame_images import frame_images
+from ibik_pin.readahead.frames_ahead import FrameImagesAhead
 from ibik_pin.solvers import make_solver
 from ibik_pin.subject.scaling import scale_human, segment_lengths_from_keypoints
 from ibik_pin.synthetic.defects import SilhouetteDefects, apply_defects
@@ -48,7 +50,6 @@ from ibik_pin.synthetic.rig import humaneva_rig
 from ibik_pin.synthetic.silhouettes import render_limb_masks, render_silhouettes
 from ibik_pin.tasks import FramePositionTask, ImageTask
 from ibik_pin.tracking.first_frame import solve_first_frame
-from ibik_pin.tracking.frame_images import FrameImagesAhead, frame_images
 from ibik_pin.tracking.settings import TrackingSettings
 from ibik_pin.tracking.tracker import Tracker
 from ibik_pin.tracking.views import support_caps, target_boxes

@@ -68,7 +68,7 @@ class TrackingSettings:
             image task's criterion, step and views, when the stack gives them, replace
             `criterion`, `image_step` and the cameras; a posture task's weight `posture_weight`.
         read_ahead: where each frame's silhouettes are read and its support images built while
-            the frame before is solved (tracking.frame_images): "process" (a forked child; a thread
+            the frame before is solved (readahead.frames_ahead): "process" (a forked child; a thread
             where fork is not available, off Linux), "thread", or "off" (in turn, on one thread:
             ibik batch's workers, one per core). The results are the same.
     """

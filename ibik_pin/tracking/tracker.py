@@ -26,6 +26,9 @@ from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
 from ibik_pin.feet import foot_point_joints
 from ibik_pin.limits import JointLimits
 from ibik_pin.model import BodyModel
+from ibik_pin.readahead.frame_images import FrameImages, frame_images
+from ibik_pin.readahead.frames_ahead import READ_AHEAD_MODES, FrameImagesAhead
+from ibik_pin.readahead.image_process import FrameRecords
 from ibik_pin.solvers import SolveResult, make_solver
 from ibik_pin.tasks import FramePositionTask, ImageTask, PostureTask
 from ibik_pin.tasks.base import GradientTask
@@ -34,8 +37,6 @@ from ibik_pin.tasks.segments import SegmentCriterion
 from ibik_pin.tasks.silhouette_axis import SilhouetteAxisTask
 from ibik_pin.tasks.weighted_sum import WeightedSum
 from ibik_pin.tracking.first_frame import solve_first_frame
-from ibik_pin.tracking.frame_images import READ_AHEAD_MODES, FrameImages, FrameImagesAhead, frame_images
-from ibik_pin.tracking.image_process import FrameRecords
 from ibik_pin.tracking.levels import StackPlan, StackTasks
 from ibik_pin.tracking.outcomes import LevelOutcome, level_outcomes
 from ibik_pin.tracking.result import TrackingResult

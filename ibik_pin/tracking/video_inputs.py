@@ -348,7 +348,7 @@ class SilhouetteQualityReader:
             self._read[frame] = True
         return masks
 
-    # Its figures, for a reader in another process (tracking.image_process.FrameRecords).
+    # Its figures, for a reader in another process (readahead.image_process.FrameRecords).
     def recorded_frames(self) -> int:
         """How many frames, from frame 0 on, have been read (their figures kept), here or elsewhere."""
         unread = np.flatnonzero(~(self._read | self._read_elsewhere))

@@ -2,7 +2,7 @@
 
 `initial_configuration` places the neutral pose on the first frame's targets; `support_caps` gives
 each view's support cap (a limb's half width seen at the subject's distance). Each frame's views are
-built from its silhouettes by :mod:`ibik_pin.tracking.frame_images`.
+built from its silhouettes by :mod:`ibik_pin.readahead.frame_images`.
 """
 
 from __future__ import annotations

@@ -54,7 +54,7 @@ def scan_mask(mask: np.ndarray) -> ScannedMask:
     """A 2D bool or uint8 mask's bool copy, its count of set pixels and their bounding box, in one
     compiled pass (as_mask's copy, any(), all() and box_around() each read the whole frame, and
     each numpy call is a point where a thread working beside the solver gives up and takes back
-    the GIL: ibik_pin.tracking.frame_images).
+    the GIL: ibik_pin.readahead.frames_ahead).
 
     Raises:
         InputError: as checks.as_mask.

@@ -1,6 +1,6 @@
 """A windowed support image as plain arrays and numbers, to rebuild in another process.
 
-tracking.image_process prepares each frame's supports in a child process and sends them through
+readahead.image_process prepares each frame's supports in a child process and sends them through
 shared memory: a support that support_from_mask holds on a window around the body travels as its
 window's values, the silhouette bit-packed and its inside distance (support_from_mask's
 vision.distance.InsideDistance), from which a read outside the window computes the same wider window

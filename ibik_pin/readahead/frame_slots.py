@@ -1,5 +1,5 @@
 """A frame's images as arrays in a slot of a shared memory mapping, and back
-(tracking.image_process): what the child process writes and the parent reads in place.
+(readahead.image_process): what the child process writes and the parent reads in place.
 
 A frame's FrameImages become a small picklable description and a list of arrays (`pack_frame`):
 per view its support window, its silhouette bit-packed and its inside distance (for a read outside
@@ -15,6 +15,7 @@ import mmap
 
 import numpy as np
 
+from ibik_pin.readahead.frame_images import FrameImages
 from ibik_pin.tasks import View
 from ibik_pin.tasks.silhouette_axis import AxisView
 from ibik_pin.vision.support import SupportImage
@@ -61,7 +62,7 @@ class FrameSlots:
         return arrays
 
 
-def pack_frame(images) -> tuple[tuple, list[np.ndarray]]:
+def pack_frame(images: FrameImages) -> tuple[tuple, list[np.ndarray]]:
     """FrameImages as (a picklable description, its arrays)."""
     arrays: list[np.ndarray] = []
 
@@ -83,9 +84,7 @@ def pack_frame(images) -> tuple[tuple, list[np.ndarray]]:
     return (views, axes, list(images.disabled)), arrays
 
 
-def unpack_frame(description: tuple, arrays: list[np.ndarray], cameras: list):
-    from ibik_pin.tracking.frame_images import FrameImages  # frame_images imports image_process, which imports this
-
+def unpack_frame(description: tuple, arrays: list[np.ndarray], cameras: list) -> FrameImages:
     views_packed, axes, disabled = description
     views = []
     for camera, (kind, values, *fields) in zip(cameras, views_packed, strict=True):
@@ -103,7 +102,7 @@ def unpack_frame(description: tuple, arrays: list[np.ndarray], cameras: list):
     return FrameImages(views, disabled, axis_views)
 
 
-def slot_bytes_for(first) -> int:
+def slot_bytes_for(first: FrameImages) -> int:
     """Room for a frame's arrays: every view's support and inside distance over the whole frame,
     its silhouette's bits, and four times the first frame's medial axes."""
     room = 0

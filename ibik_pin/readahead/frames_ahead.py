@@ -2,7 +2,7 @@
 
 Reading a frame's silhouettes and building its support images and medial axes needs nothing from
 the solve. So, by default, a forked child process prepares the next frames while the main process
-solves (tracking.image_process); where fork is not available, a worker thread prepares frame
+solves (readahead.image_process); where fork is not available, a worker thread prepares frame
 t + 1 while frame t is solved (their heavy parts, compiled, release the GIL, but each hand-over of
 the GIL stalls the solver: the process does not share it).
 
@@ -13,82 +13,15 @@ them. An error while preparing a frame is raised when the tracker asks for that 
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass
 from types import TracebackType
 
-import numpy as np
-
 from ibik_pin.exceptions import InputError
-from ibik_pin.tasks import View
-from ibik_pin.tasks.silhouette_axis import AxisView
-from ibik_pin.tracking.image_process import FrameRecords, ImageProcess, can_fork
-from ibik_pin.vision.camera import CameraLike
-from ibik_pin.vision.distance import inside_distance, scan_mask
-from ibik_pin.vision.medial_axis import medial_axis_pixels
-from ibik_pin.vision.support import SupportImage, support_from_mask
+from ibik_pin.readahead.frame_images import FrameImages
+from ibik_pin.readahead.image_process import FrameRecords, ImageProcess, can_fork
 
-__all__ = ["READ_AHEAD_MODES", "FrameImages", "FrameImagesAhead", "frame_images"]
-
-
-@dataclass(frozen=True)
-class FrameImages:
-    """One frame's image inputs.
-
-    Attributes:
-        views: one overlap view per camera; disabled: the cameras whose silhouette is empty.
-        axis_views: one medial-axis view per camera, or None when the criterion needs none.
-    """
-
-    views: list[View]
-    disabled: list[str]
-    axis_views: list[AxisView] | None
-
-
-def frame_images(source: Callable[[int], Sequence[np.ndarray]], cameras: Sequence[CameraLike],
-                 caps: Sequence[float | None], axis_scales: Sequence[float] | None, frame: int,
-                 target_boxes: np.ndarray | None = None) -> FrameImages:
-    """Frame `frame`'s views from its silhouettes: per camera, the overlap criterion's support (its
-    inside cap from `caps` [px], None for none) and, when `axis_scales` is given, the medial axis of the
-    silhouette-axis term (its robust scale [px]); both read one distance transform of the silhouette.
-    `target_boxes` (F, V, 4): per frame and camera, pixels the support's window covers besides the
-    silhouette (tracking.views.target_boxes).
-
-    An empty silhouette gives a disabled view and an empty axis, reported in `disabled` rather than
-    warned of (catch_warnings, which would silence support_from_mask's warning, is not thread-safe).
-    """
-    masks = source(frame)
-    if len(masks) != len(cameras):
-        raise InputError(f"expected one silhouette per camera ({len(cameras)}), got {len(masks)}")
-    views, axes, disabled = [], [], []
-    for index, (camera, mask) in enumerate(zip(cameras, masks, strict=True)):
-        # Each whole-image numpy call here would be a point where this thread, working beside the
-        # solver, gives up the GIL and takes it back, and each such handover stalls the solver:
-        # measured, 30 handovers a frame slowed its steps by a third. So the silhouette is read in
-        # a few compiled calls: one scan, one inside and one outside distance transform.
-        scanned = scan_mask(mask)
-        if scanned.box is None:
-            disabled.append(camera.name)
-            views.append(View(camera, SupportImage(np.zeros(scanned.mask.shape, np.float32), enabled=False)))
-            axes.append(np.zeros((0, 2)))
-            continue
-        # Without a medial axis only the support reads the inside distance: up to its cap, if it has one.
-        cap = caps[index]
-        limit = None if axis_scales is not None or cap is None else cap + 0.5
-        inside = inside_distance(scanned.mask, scanned.box, limit)
-        around = None
-        if target_boxes is not None:
-            top, bottom, left, right = (int(value) for value in target_boxes[frame, index])
-            around = (slice(top, bottom), slice(left, right))
-        views.append(View(camera, support_from_mask(scanned, inside_cap_px=cap, inside=inside,
-                                                    also_around=around)))
-        if axis_scales is not None:
-            axes.append(medial_axis_pixels(scanned.mask, inside=inside))
-    axis_views = (None if axis_scales is None else
-                  [AxisView(camera, pixels, scale) for camera, pixels, scale in zip(cameras, axes, axis_scales,
-                                                                                     strict=True)])
-    return FrameImages(views, disabled, axis_views)
+__all__ = ["READ_AHEAD_MODES", "FrameImagesAhead"]
 
 
 READ_AHEAD_MODES = ("process", "thread", "off")
@@ -98,7 +31,7 @@ class FrameImagesAhead:
     """Prepares frames 0 .. frame_count - 1 with `prepare(frame)` ahead of the one asked (`prepare`
     None: a run without images, which asks for none).
 
-    Modes: "process" (tracking.image_process: a forked child, a few frames ahead; where fork is
+    Modes: "process" (readahead.image_process: a forked child, a few frames ahead; where fork is
     not available, a thread), "thread" (one frame ahead in a worker thread), "off" (each frame
     when asked, in the caller's thread). The process mode needs the frames asked in order, and a
     frame's arrays are the child's shared memory, valid until two more frames have been asked for;

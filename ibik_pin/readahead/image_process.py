@@ -1,6 +1,6 @@
 """Each frame's image inputs prepared in a child process, the arrays passed through shared memory.
 
-Why a process and not only a thread: the thread that prepares the images (tracking.frame_images)
+Why a process and not only a thread: the thread that prepares the images (readahead.frames_ahead)
 runs compiled code that releases the GIL, and every time it takes the GIL back the solver's thread
 waits for a hand-over. Measured on real boxing with two views, the solver's own work took 39% longer
 beside that thread than alone (6.3 against 4.5 ms a frame). A child process has a GIL of its own.
@@ -31,7 +31,7 @@ frame's solve, when the child is ahead (`child_is_ahead`): with two views it pre
 less time than the parent solves one, and would otherwise wait; with four it is the slower one,
 and the parent keeps the work.
 
-Fork only: on Linux. Elsewhere tracking.frame_images uses a thread.
+Fork only: on Linux. Elsewhere readahead.frames_ahead uses a thread.
 """
 
 from __future__ import annotations
@@ -53,7 +53,7 @@ import cv2
 import numpy as np
 
 from ibik_pin.exceptions import IbikError
-from ibik_pin.tracking.frame_slots import FrameSlots, pack_frame, slot_bytes_for, unpack_frame
+from ibik_pin.readahead.frame_slots import FrameSlots, pack_frame, slot_bytes_for, unpack_frame
 
 __all__ = ["FrameRecords", "ImageProcess", "can_fork"]
 
