@@ -1,8 +1,17 @@
-"""Silhouette masks on disk: one image per frame, non-zero = person.
+"""Silhouette masks on disk: one image per frame.
 
 A camera's masks are the image files of one folder, in the natural order of their names
-(``frame2`` before ``frame10``); each is read as grey levels and thresholded, so 0/255 masks
-(also JPEG-compressed ones) and 0/1 label images both work.
+(``frame2`` before ``frame10``). The conventions users' tools write are recognised, per file:
+
+- a grey image, 8 or 16 bits: 0/255 (0/65535) masks, also after JPEG compression, are thresholded
+  at mid-range; 0/1 label images (no value above mid-range) at non-zero;
+- a colour image: its grey levels, as above;
+- an image with an alpha channel that is not uniform: the alpha channel is the silhouette
+  (thresholded at mid-range); a uniform alpha (an opaque RGBA export) is ignored;
+- a float image (TIFF): values in [0, 1], thresholded at 0.5.
+
+A label image with several non-zero labels holds several people or parts, and is refused by name:
+which label is the subject cannot be guessed.
 """
 
 from __future__ import annotations
@@ -18,7 +27,7 @@ from ibik_pin.io.files import PathLike
 from ibik_pin.io.native_output import captured_native_stderr
 from ibik_pin.io.png import decode_grey_png
 
-__all__ = ["IMAGE_SUFFIXES", "list_mask_files", "read_image", "read_mask"]
+__all__ = ["IMAGE_SUFFIXES", "decode_mask", "list_mask_files", "mask_convention", "read_image", "read_mask"]
 
 #: The file suffixes read as images (any case).
 IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"})
@@ -42,7 +51,7 @@ def read_image(path: Path, flags: int, what: str) -> np.ndarray:
                               f"cannot read it ({error.strerror})") from None
     if not data:
         raise FileFormatError(f"{what} file '{path}': expected a readable image, found an empty file")
-    if flags == cv2.IMREAD_GRAYSCALE:
+    if flags in (cv2.IMREAD_GRAYSCALE, cv2.IMREAD_UNCHANGED):  # the same pixels for a grey PNG
         image = decode_grey_png(data, f"{what} file '{path}'")
         if image is not None:
             return image
@@ -54,11 +63,81 @@ def read_image(path: Path, flags: int, what: str) -> np.ndarray:
     return image
 
 
-def read_mask(path: PathLike, expected_size: tuple[int, int] | None = None) -> np.ndarray:
-    """A silhouette mask from an image file.
+def _check_expected_size(expected_size: object) -> tuple[int, int] | None:
+    """`expected_size` as (width, height) ints, or InputError naming the value received."""
+    if expected_size is None:
+        return None
+    sides = tuple(expected_size) if isinstance(expected_size, (tuple, list, np.ndarray)) else ()
+    if len(sides) != 2 or not all(isinstance(side, (int, np.integer)) and not isinstance(side, bool) and side > 0
+                                  for side in sides):
+        raise InputError(f"read_mask: expected_size: expected (width, height) as two positive whole numbers "
+                         f"of pixels, found {expected_size!r}")
+    return int(sides[0]), int(sides[1])
 
-    The image is read as grey levels; a 0/255 mask (also after JPEG compression) is thresholded
-    at mid-grey, a 0/1 label image (maximum <= 127) at non-zero.
+
+def _binary(values: np.ndarray, full_scale: float, where: str) -> tuple[np.ndarray, str]:
+    """A one-channel image as a mask: thresholded at mid-range when it reaches above it, else a label
+    image (non-zero = person), refused when it holds several non-zero labels."""
+    if values.dtype.kind == "f":
+        return values > 0.5, "float image, thresholded at 0.5"
+    peak = int(values.max()) if values.size else 0
+    if peak > full_scale / 2:
+        return values > full_scale // 2, f"{values.dtype.itemsize * 8}-bit mask, thresholded at mid-range"
+    labels = np.unique(values[values != 0]) if peak > 1 else np.arange(1, peak + 1)
+    if labels.size > 1:
+        shown = ", ".join(str(int(label)) for label in labels[:5]) + (", ..." if labels.size > 5 else "")
+        raise InputError(f"{where}: expected a mask of one person (0 and one other value), found a label image "
+                         f"with {labels.size} labels ({shown}); write the subject's label alone")
+    return values != 0, f"{values.dtype.itemsize * 8}-bit label image, non-zero = person"
+
+
+def decode_mask(image: np.ndarray, where: str = "mask") -> tuple[np.ndarray, str]:
+    """A decoded image (as OpenCV's IMREAD_UNCHANGED gives it) as a silhouette, and the convention read.
+
+    Args:
+        image: (H, W) grey, (H, W, 3) BGR, (H, W, 2) grey + alpha or (H, W, 4) BGRA; uint8, uint16
+            or float.
+        where: what to name in an error (the file).
+
+    Returns:
+        (H, W) bool mask, True = person; the convention as a phrase (see the module docstring).
+
+    Raises:
+        InputError: a label image with several labels, or an array that is no image.
+    """
+    if not (image.ndim == 2 or (image.ndim == 3 and image.shape[2] in (2, 3, 4))):
+        raise InputError(f"{where}: expected a grey, colour or colour + alpha image, found an array of shape "
+                         f"{image.shape}")
+    if image.dtype.kind not in "uf":
+        raise InputError(f"{where}: expected 8-bit, 16-bit or float pixels, found {image.dtype}")
+    full_scale = 1.0 if image.dtype.kind == "f" else float(np.iinfo(image.dtype).max)
+    channels = image
+    if channels.ndim == 3 and channels.shape[2] in (2, 4):
+        alpha = channels[..., -1]
+        if alpha.size and alpha.min() != alpha.max():
+            return alpha > full_scale / 2, "alpha channel, thresholded at mid-range"
+        channels = channels[..., :-1]
+    if channels.ndim == 3:
+        grey = channels[..., 0] if channels.shape[2] == 1 else cv2.cvtColor(
+            np.ascontiguousarray(channels), cv2.COLOR_BGR2GRAY)  # grey + alpha: the grey alone
+        mask, convention = _binary(grey, full_scale, where)
+        return mask, "colour image read as grey: " + convention
+    return _binary(channels, full_scale, where)
+
+
+def _read_decoded(path: PathLike, expected_size: object) -> tuple[np.ndarray, str]:
+    size = _check_expected_size(expected_size)
+    path = Path(path)
+    where = f"mask file '{path}'"
+    image = read_image(path, cv2.IMREAD_UNCHANGED, "mask")
+    found = (image.shape[1], image.shape[0])
+    if size is not None and size != found:
+        raise InputError(f"{where}: expected size (w, h) = {size}, found (w, h) = {found}")
+    return decode_mask(image, where)
+
+
+def read_mask(path: PathLike, expected_size: tuple[int, int] | None = None) -> np.ndarray:
+    """A silhouette mask from an image file, in any of the conventions of the module docstring.
 
     Args:
         path: image file (png, jpg, bmp, tif, ...).
@@ -69,17 +148,16 @@ def read_mask(path: PathLike, expected_size: tuple[int, int] | None = None) -> n
 
     Raises:
         FileFormatError: the file is missing or OpenCV cannot decode it.
-        InputError: the size differs from ``expected_size``.
+        InputError: the size differs from ``expected_size``, ``expected_size`` is not two positive
+            whole numbers, or the image is a label image with several labels.
     """
-    path = Path(path)
-    image = read_image(path, cv2.IMREAD_GRAYSCALE, "mask")
-    found = (image.shape[1], image.shape[0])
-    if expected_size is not None and tuple(int(s) for s in expected_size) != found:
-        raise InputError(
-            f"mask file '{path}': expected size (w, h) = {tuple(int(s) for s in expected_size)}, found (w, h) = {found}"
-        )
-    threshold = 127 if image.max() > 127 else 0
-    return image > threshold
+    return _read_decoded(path, expected_size)[0]
+
+
+def mask_convention(path: PathLike) -> str:
+    """How `read_mask` reads this file, as a phrase (e.g. "alpha channel, thresholded at mid-range"),
+    to state in a run's report. Raises as `read_mask`."""
+    return _read_decoded(path, None)[1]
 
 
 def _natural_key(path: Path) -> list:

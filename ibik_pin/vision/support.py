@@ -147,7 +147,7 @@ class SupportImage:
         computed, or where a wider window would be the frame), the frame's (H, W) values from (0, 0).
 
         On the Pose2Sim video a tenth of the views read outside their window, each the whole frame
-        until covering was asked for: a wider window is a fraction of it (docs/method.md, "Stop 36").
+        until covering was asked for: a wider window is a fraction of it.
         """
         if self._values is None and not whole_frame:
             window = cast(Window, self._window)

@@ -71,7 +71,7 @@ class Recipe(NamedTuple):
 # silhouette's margin stays wide for partial silhouettes: on the Pose2Sim video
 # (experiments/pose2sim_video.py) 8 px instead of 32 took the whole frames then read from 278 to
 # 1134 and its IBIK runs' solves from 80-145 to 26-66 frames/s, where on the real-mocap benchmark
-# it saved a tenth of the windows' pixels (docs/method.md, "Stop 36").
+# it saved a tenth of the windows' pixels.
 SILHOUETTE_MARGIN_PX = 32
 TARGETS_MARGIN_PX = 32
 # OpenCV blurs float images by vectors of columns and the last few columns of a row one by one,
