@@ -15,7 +15,17 @@ import numpy as np
 from ibik_pin.exceptions import InputError
 from ibik_pin.io.files import write_atomically
 
-__all__ = ["Panel", "plot_panels", "plot_series"]
+__all__ = ["JOINT_ANGLES", "Panel", "joint_angle_panels", "plot_panels", "plot_series"]
+
+# The angles a biomechanist reads first, as motion.mot's columns (degrees; flexion positive, ankle:
+# dorsiflexion positive), per panel: (title, left column, right column).
+JOINT_ANGLES = (
+    ("hip flexion", "left_hip_Z", "right_hip_Z"),
+    ("knee flexion", "left_knee_Z", "right_knee_Z"),
+    ("ankle dorsiflexion", "left_ankle_Z", "right_ankle_Z"),
+    ("shoulder flexion", "left_shoulder_Z", "right_shoulder_Z"),
+    ("elbow flexion", "left_elbow_Z", "right_elbow_Z"),
+)
 
 
 @dataclass(frozen=True)
@@ -37,6 +47,37 @@ class Panel:
     title: str
     ylim: tuple[float, float] | None = None
     highlight: str | None = None
+
+
+def joint_angle_panels(columns_deg: dict[str, np.ndarray]) -> list[Panel]:
+    """The panels of angles.png from motion.mot's columns: one per row of `JOINT_ANGLES` whose
+    columns are present, series labelled "left" and "right" (drawn solid and dashed).
+
+    Args:
+        columns_deg: column name -> values (F,) [deg], as motion.mot holds them.
+
+    Raises:
+        InputError: none of the columns is present (not this model's motion).
+    """
+    panels = [Panel({"left": columns_deg[left], "right": columns_deg[right]}, f"{title} [deg]", title)
+              for title, left, right in JOINT_ANGLES if left in columns_deg and right in columns_deg]
+    if not panels:
+        raise InputError(f"columns_deg: expected the joint angle columns {JOINT_ANGLES[0][1]}, ..., found "
+                         f"{', '.join(list(columns_deg)[:6])}")
+    return panels
+
+
+def _side_and_part(label: str) -> tuple[str | None, str]:
+    """("left" | "right" | None, the label without its side): "LWrist", "left_knee_Z", "left"."""
+    lowered = label.lower()
+    for side in ("left", "right"):
+        if lowered == side:
+            return side, ""
+        if lowered.startswith((side + "_", side + " ")):
+            return side, label[len(side) + 1:]
+    if len(label) > 1 and label[0] in "LR" and label[1].isupper():
+        return ("left" if label[0] == "L" else "right"), label[1:]
+    return None, label
 
 
 def plot_series(
@@ -99,14 +140,20 @@ def plot_panels(
     FigureCanvasAgg(figure)
     for index, (panel, values_by_label) in enumerate(checked):
         axes = figure.add_subplot(len(panels), 1, index + 1)
-        # matplotlib's default cycle repeats after 10 colours; tab20 tells 20 targets apart.
-        count = len(values_by_label)
-        colors = [colormaps["tab20"](index % 20) if count > 10 else None for index in range(count)]
-        for (label, values), color in zip(values_by_label.items(), colors, strict=False):
+        # Left and right of one part share its colour and differ in line style (solid, dashed), as
+        # gait reports draw them; parts take tab10's colours, tab20's beyond ten.
+        sides_and_parts = {label: _side_and_part(label) for label in values_by_label}
+        parts = list(dict.fromkeys(part for _, part in sides_and_parts.values()))
+        palette = colormaps["tab10" if len(parts) <= 10 else "tab20"]
+        for label, values in values_by_label.items():
+            side, part = sides_and_parts[label]
             if label == panel.highlight:
                 axes.plot(times, values, label=label, linewidth=2.5, color="black", zorder=3)
             else:
-                axes.plot(times, values, label=label, linewidth=1.2, color=color)
+                by_side = "tab:red" if side == "left" else "tab:blue"  # a series named by its side alone
+                color = palette(parts.index(part) % palette.N) if part else by_side
+                axes.plot(times, values, label=label, linewidth=1.4, color=color,
+                          linestyle="--" if side == "right" else "-")
         if panel.ylim is not None:
             axes.set_ylim(*panel.ylim)
         elif all(np.nanmin(v, initial=0.0) >= 0.0 for v in values_by_label.values()):
