@@ -178,7 +178,14 @@ def _overlay_frame(
             f"skeletons: expected a pair (starts (S, 2), ends (S, 2)) [px] at frame {index}, "
             f"got {type(skeleton).__name__}"
         )
-    return draw_skeleton(image, skeleton[0], skeleton[1], color=skeleton_color)
+    return draw_skeleton(image, skeleton[0], skeleton[1], color=skeleton_color,
+                         thickness=skeleton_thickness(image.shape[:2]))
+
+
+def skeleton_thickness(image_size_hw: tuple[int, int]) -> int:
+    """The skeleton's line width [px] for an image of (height, width) [px]: 2 px at 640 x 480, in
+    proportion to the shorter side above it (4 px at 1088 x 1920), so lines read at any size."""
+    return max(2, round(min(image_size_hw) / 240))
 
 
 def _draw_captions(image: np.ndarray, caption: str, legend: list[tuple[str, tuple[int, int, int]]]) -> np.ndarray:
