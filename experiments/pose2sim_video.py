@@ -72,7 +72,7 @@ VARIANTS = {
     "ibik_from_video_refit": (False, True, "mediapipe", False, True, True),
     "ibik_from_video_limb_targets": (False, True, "mediapipe", True, False, False),
 }
-# The silhouette check: these keypoints of Pose2Sim's, projected, should fall inside.
+# The silhouette check: these keypoints of Pose2Sim's, projected, should fall inside.
 SILHOUETTE_KEYPOINTS = ["RAnkle", "LAnkle", "RKnee", "LKnee", "RHip", "LHip", "RWrist", "LWrist", "RElbow",
                         "LElbow", "RShoulder", "LShoulder", "Head"]
 END_EFFECTORS = ["LWrist", "RWrist", "LAnkle", "RAnkle", "LHip", "RHip", "Head"]

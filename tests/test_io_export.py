@@ -22,7 +22,7 @@ from tests.conftest import random_human_configuration
 
 FRAME_COUNT = 10
 FRAME_TIME = 0.01  # [s]
-BVH_POSITION_TOLERANCE = 1e-3  # [m], the acceptance: "within 1 mm"
+BVH_POSITION_TOLERANCE = 1e-3  # [m]: the BVH positions within 1 mm
 ANGLE_TOLERANCE = 1e-9  # [deg]
 
 # The human's BVH joints: name -> model joints, and end site -> keypoint frame.

@@ -19,7 +19,7 @@ from ibik_pin.io.trc import read_trc
 from tests.paths import TEST_DATA
 
 POSE2SIM_TRC = TEST_DATA / "pose2sim_balancing_excerpt.trc"
-# Markers of the played model against joints.trc [m] (the acceptance: 1 mm).
+# Markers of the played model against joints.trc [m]: within 1 mm.
 MARKER_TOLERANCE_M = 1e-3
 # joints.trc is written with 6+ significant digits; the Hip midpoint is computed from the same model.
 HIP_TOLERANCE_M = 1e-6

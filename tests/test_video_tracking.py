@@ -28,7 +28,7 @@ from tests.paths import TEST_DATA
 VIDEOS = TEST_DATA / "pose2sim_video"
 CALIBRATION = VIDEOS / "calibration.toml"
 FRAMES = 10
-# The keypoints the issue measures silhouettes with.
+# The keypoints the silhouettes are measured with.
 MEASURED = ["RAnkle", "LAnkle", "RKnee", "LKnee", "RHip", "LHip", "RWrist", "LWrist", "RElbow", "LElbow",
             "RShoulder", "LShoulder", "Head"]
 

@@ -18,7 +18,7 @@ from tests.paths import TEST_DATA
 
 FRAMES = 30
 MIN_REDUCTION = 0.40  # IBIK's elbow (boxing) or knee (walking) error at least 40% below PIK's
-MAX_IBIK_ERROR_MM = 25.0  # ... and at most this (the acceptance)
+MAX_IBIK_ERROR_MM = 25.0  # ... and at most this (the acceptance bound)
 # A standing adult's frontal silhouette is about 0.5-0.6 m^2 (at the reference stature); no view
 # of the body may cover more than this many square metres at the subject's distance.
 MAX_SILHOUETTE_AREA_M2 = 0.8
