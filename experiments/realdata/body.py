@@ -164,20 +164,21 @@ class MocapBody:
         joint_names: the skeleton's J joints (SkeletonMotion.names).
         source: "asf", "cmu_bvh" or "boxing" (which :data:`Anatomy` names its bones).
         scale: every size is multiplied by it (the subject's stature / REFERENCE_STATURE_M).
+        anatomy: where the skeleton's bones are (None: the source's, :data:`ANATOMIES`).
 
     Raises:
         UnknownNameError: a joint the anatomy names is not in the skeleton.
     """
 
-    def __init__(self, joint_names: Sequence[str], source: str, scale: float = 1.0):
-        if source not in ANATOMIES:
+    def __init__(self, joint_names: Sequence[str], source: str, scale: float = 1.0, anatomy: Anatomy | None = None):
+        if anatomy is None and source not in ANATOMIES:
             raise UnknownNameError(f"source: expected one of {', '.join(ANATOMIES)}, got {source!r}")
         if not (np.isfinite(scale) and scale > 0.0):
             raise InputError(f"scale: expected a positive factor, got {scale}")
         self.source = source
         self.scale = float(scale)
         self.joint_names = list(joint_names)
-        anatomy = ANATOMIES[source]
+        anatomy = ANATOMIES[source] if anatomy is None else anatomy
         self._anatomy = anatomy
         # (kind of chain, part name, joint indices)
         chains: list[tuple[str, str, list[int]]] = [("neck", "neck", self._indices(anatomy.neck))]

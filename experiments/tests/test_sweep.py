@@ -1,0 +1,56 @@
+"""The sweep benchmark: its draws stay in their ranges, the static's drift is what it says, and a
+quick run writes every figure."""
+
+import json
+
+import numpy as np
+import pytest
+import sweep
+from realdata.runner import DEFAULT_DATA
+from sweepkit.conditions import PARENTS, draw_condition, drift_static
+from sweepkit.motions import MOTIONS
+
+needs_data = pytest.mark.skipif(not DEFAULT_DATA.is_dir(), reason="the shared mocap data folder is absent")
+
+
+def test_conditions_are_seeded_and_stay_in_their_ranges():
+    conditions = [draw_condition(index, seed=3) for index in range(2 * len(MOTIONS))]
+    assert draw_condition(5, seed=3) == conditions[5]
+    assert {c.motion for c in conditions} == set(MOTIONS)
+    for condition in conditions:
+        first, second = condition.cameras[:2]
+        separation = abs((second.azimuth_deg - first.azimuth_deg + 180.0) % 360.0 - 180.0)
+        assert 45.0 - 1e-9 <= separation <= 135.0 + 1e-9
+        for camera in condition.cameras:
+            assert 0.5 <= camera.height_m <= 2.5 and 3.0 <= camera.distance_m <= 7.0 and 50.0 <= camera.fov_deg <= 90.0
+        assert 0.7 <= condition.body.limb_radius_factor <= 1.4
+        assert all(0.96 <= f <= 1.04 for f in condition.length_factors.values())
+        assert 0.0 <= condition.target_noise_mm <= 10.0
+
+
+def test_the_static_drift_scales_each_segment_by_its_own_factor():
+    names = ["Hip", "LHip", "LKnee", "LAnkle", "Neck", "LShoulder", "LElbow", "LWrist"]
+    rng = np.random.default_rng(0)
+    static = rng.normal(0.0, 0.3, (3, len(names), 3))
+    factors = {name: 1.0 + 0.01 * k for k, name in enumerate(names)}
+    drifted = drift_static(names, static, factors)
+    for child in names[1:]:
+        parent = names.index(PARENTS[child])
+        before = np.linalg.norm(static[:, names.index(child)] - static[:, parent], axis=1)
+        after = np.linalg.norm(drifted[:, names.index(child)] - drifted[:, parent], axis=1)
+        np.testing.assert_allclose(after, factors[child] * before, rtol=1e-12)
+    np.testing.assert_array_equal(drifted[:, 0], static[:, 0])
+
+
+@needs_data
+def test_a_quick_sweep_writes_every_figure(tmp_path):
+    result = sweep.main(["--quick", "--out", str(tmp_path), "--quiet"])
+    written = json.loads((tmp_path / "sweep.json").read_text())
+    assert len(written["conditions"]) == 2 and len(written["runs"]) == 2 * 3
+    for key in ("pik/clean", "ibik2v/clean", "ibik2v/defects"):
+        for group in ("elbows", "knees", "targets"):
+            stats = result["summary"]["all"][key][group]
+            assert stats["count"] == 2 and 0.0 < stats["median"] <= stats["p90"] < 500.0
+    # Targets are met to within the drawn noise and the model's keypoint offsets.
+    assert result["summary"]["all"]["pik/clean"]["targets"]["p90"] < 40.0
+    assert "| IBIK 2v | clean |" in (tmp_path / "sweep.md").read_text()
