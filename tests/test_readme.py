@@ -112,3 +112,13 @@ def test_the_fig7_example_prints_what_the_readme_says(tmp_path):
     shown = [float(value) for value in values.rstrip("]").split()]
     got = [float(value) for value in line.rsplit("[", 1)[1].rstrip("]").split()]
     assert got == pytest.approx(shown, abs=1.5e-3)
+
+
+def test_the_readme_s_results_table_is_the_one_in_docs_results_md():
+    text = readme_text()
+    section = text.split("## Results", 1)[1].split("\n## ", 1)[0]
+    figures = re.findall(r"\| (\d+\.\d) \| (\d+\.\d) \|", section)
+    assert len(figures) >= 4, "expected a results table of PIK and IBIK figures under '## Results'"
+    results = (REPOSITORY / "docs" / "results.md").read_text(encoding="utf-8")
+    missing = [figure for pair in figures for figure in pair if f" {figure} " not in results]
+    assert not missing, f"README.md's results table has figures docs/results.md does not: {missing}"
