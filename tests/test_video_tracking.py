@@ -87,7 +87,7 @@ def test_learned_silhouettes_hold_the_subject_and_nobody_else(cameras, reference
     measured = np.stack([reference[name] for name in MEASURED], axis=1)
     shares = {camera.name: inside_share(camera, masks[index], measured) for index, camera in enumerate(cameras)}
     # Measured: 0.98, 1.00, 0.84, 0.99. cam_03's calibration misplaces Pose2Sim's own points by about
-    # 25 px at full size (README, "From video"), which takes its limbs' edges out of the silhouette.
+    # 25 px at full size (docs/method.md, "From video"), which takes its limbs' edges out of the silhouette.
     assert min(shares[name] for name in ("cam_01", "cam_02", "cam_04")) >= 0.9, shares
     assert shares["cam_03"] >= 0.75, shares
     for index, camera in enumerate(cameras):
@@ -111,7 +111,7 @@ def test_track_without_targets_triangulates_them_and_reports_the_silhouettes(tra
         triangulated.positions[:, triangulated.marker_names.index(name)] - reference[name], axis=1)))
         for name in ("LWrist", "RWrist", "LAnkle", "RAnkle", "LHip", "RHip", "Head")}
     # Measured on this excerpt: wrists 23-27 mm, ankles 25-36, hips 46 and 84, head 35 (the full video:
-    # README). BlazePose's hip landmarks sit lower than HALPE's, hence the wider hip bound.
+    # docs/results.md). BlazePose's hip landmarks sit lower than HALPE's, hence the wider hip bound.
     assert max(agreement[name] for name in ("LWrist", "RWrist", "LAnkle", "RAnkle", "Head")) < 0.05, agreement
     assert max(agreement["LHip"], agreement["RHip"]) < 0.12, agreement
     report = json.loads((out / "report.json").read_text())

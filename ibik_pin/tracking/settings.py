@@ -45,7 +45,7 @@ class TrackingSettings:
             the targets, for the frame's image steps (tracking.swivel): recovers limbs that fast
             motion threw into another basin of the criterion. Runs only when two views cross.
             With the trunk held (image_moves) it brought the real-mocap benchmark's boxing elbows
-            from about 100 mm to under 20 mm (2 views; README).
+            from about 100 mm to under 20 mm (2 views; docs/results.md).
         swivel_refine: points the swivel search then tries on each side of a limb's best sample,
             within one sample's spacing (tracking.swivel.SwivelSearch.refine; 0: none).
         feet_by_ankle: toe and heel targets move only the joints that do not move their ankle

@@ -35,7 +35,7 @@ VIDEO_PIXEL_FORMAT = "yuv420p"
 # x264's constant rate factor: 23 is its default, visually clean for drawn lines on video.
 _CRF = "23"
 # x264 preset: "veryfast" encoded the Pose2Sim demo 3x faster than x264's default "medium", and smaller
-# (0.59 against 0.68 MB; experiments/overlay_codecs.py, README).
+# (0.59 against 0.68 MB; experiments/overlay_codecs.py, docs/results.md).
 _PRESET = "veryfast"
 # Mask pixels drawn as the background when there is no image: grey level (0-255).
 _MASK_GREY = 150
