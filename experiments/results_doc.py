@@ -312,8 +312,11 @@ def speed_section() -> list[str]:
     data = load("benchmark.json")
 
     def rounds(figures: dict, key: str) -> str:
-        values = figures[f"{key}_rounds"]
-        return f"{figures[key]:.0f} ({min(values):.0f}-{max(values):.0f})"
+        values = figures.get(f"{key}_rounds")
+        return f"{figures[key]:.0f}" + (f" ({min(values):.0f}-{max(values):.0f})" if values else "")
+
+    def spread(values: list[float] | None) -> str:
+        return f"{min(values):.2f}-{max(values):.2f}" if values else ""
 
     arm = [[f"{views.split('_')[1]} view(s), {mode}", rounds(figures, "fps"), rounds(figures, "tracked_fps"),
             mm(figures["elbow_error_mm"])]
@@ -326,8 +329,7 @@ def speed_section() -> list[str]:
             body.append([f"{method}, {setting.replace('_', ' ')}", rounds(figures, "fps"),
                          rounds(figures, "solve_fps"), mm(figures["judged_error_mm"])])
     ratios = data["ratios"]
-    ratio_rows = [[name.replace("_", " "), f"{ratios[name]:.2f}",
-                   f"{min(ratios[name + '_rounds']):.2f}-{max(ratios[name + '_rounds']):.2f}"]
+    ratio_rows = [[name.replace("_", " "), f"{ratios[name]:.2f}", spread(ratios.get(f"{name}_rounds"))]
                   for name in ratios if not name.endswith("_rounds")]
     return [
         "## Speed",
