@@ -264,3 +264,37 @@ def test_positions_of_the_wrong_shape_raise_an_input_error():
             data_rate=10.0,
             frame_numbers=[1, 2],
         )
+
+
+@pytest.mark.parametrize("encoding", ["utf-16", "utf-16-le", "utf-16-be"])
+def test_a_utf16_export_reads_like_its_utf8_original(tmp_path, encoding):
+    """Windows' "Unicode text" is UTF-16, with a byte-order mark or without; it is text, not binary."""
+    path = small_trc(tmp_path, "1\t0.0\t1\t2\t3\t4\t5\t6\n2\t0.02\t7\t8\t9\t1\t2\t3\n")
+    (tmp_path / "wide.trc").write_bytes(path.read_text().replace("\n", "\r\n").encode(encoding))
+    np.testing.assert_array_equal(read_trc(tmp_path / "wide.trc").positions, read_trc(path).positions)
+
+
+def test_a_last_row_cut_short_by_an_interrupted_write_is_left_out_with_a_warning(tmp_path):
+    # "-0" is the first two characters of "-0.5": a prefix, not a coordinate.
+    path = small_trc(tmp_path, "1\t0.0\t1\t2\t3\t4\t5\t6\n2\t0.02\t7\t8\t9\t1\t-0", frames=2)
+    with pytest.warns(IbikWarning, match=r"line 7: the last row is cut short \(no line end, 7 of 8 cells\)"):
+        data = read_trc(path)
+    assert data.positions.shape == (1, 2, 3) and list(data.frame_numbers) == [1]
+
+
+def test_a_complete_last_row_without_a_line_end_is_kept(tmp_path):
+    path = small_trc(tmp_path, "1\t0.0\t1\t2\t3\t4\t5\t6\n2\t0.02\t7\t8\t9\t1\t2\t3")
+    assert read_trc(path).positions.shape == (2, 2, 3)
+
+
+def test_a_frame_number_given_twice_is_refused_naming_both_lines(tmp_path):
+    path = small_trc(tmp_path, "1\t0.0\t1\t2\t3\t4\t5\t6\n2\t0.02\t7\t8\t9\t1\t2\t3\n2\t0.04\t7\t8\t9\t1\t2\t3\n",
+                     frames=3)
+    with pytest.raises(FileFormatError, match=r"lines 7 and 8: expected each Frame# once, found 2 twice"):
+        read_trc(path)
+
+
+def test_marker_names_are_read_in_their_composed_unicode_form(tmp_path):
+    decomposed = SMALL_TRC_HEADER.replace("\tA\t", "\tCre\u0300me\t").replace("\tB\t", "\tCr\u00e8me\t")
+    (tmp_path / "accents.trc").write_text(decomposed.format(frames=1, units="mm") + "1\t0\t1\t2\t3\t4\t5\t6\n")
+    assert read_trc(tmp_path / "accents.trc").marker_names == ["Cr\u00e8me", "Cr\u00e8me"]

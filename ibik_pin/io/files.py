@@ -80,8 +80,9 @@ def read_text(path: str | os.PathLike[str], what: str) -> str:
 
     Returns:
         Its content, universal newlines. UTF-8, with or without the byte-order mark Windows tools
-        write; failing that Windows-1252, in which motion-capture software of Western locales writes
-        its headers (a file name with an accent).
+        write; UTF-16 (Windows' "Unicode text"), with or without its mark; failing those
+        Windows-1252, in which motion-capture software of Western locales writes its headers (a file
+        name with an accent).
 
     Raises:
         FileFormatError: The file is missing, not a regular file, too large, unreadable, or text
@@ -92,6 +93,9 @@ def read_text(path: str | os.PathLike[str], what: str) -> str:
         data = path.read_bytes()
     except OSError as error:
         raise FileFormatError(f"{path}: cannot read this {what} file: {error.strerror or error}") from error
+    utf16 = _utf16(data)
+    if utf16 is not None:
+        return utf16.replace("\r\n", "\n").replace("\r", "\n")
     if b"\x00" in data:
         raise FileFormatError(f"{path}: cannot read this {what} file: it is binary, not text")
     for encoding in ("utf-8-sig", "cp1252"):
@@ -100,6 +104,25 @@ def read_text(path: str | os.PathLike[str], what: str) -> str:
         except UnicodeDecodeError:
             continue
     raise FileFormatError(f"{path}: cannot read this {what} file: it is neither UTF-8 nor Windows-1252 text")
+
+
+def _utf16(data: bytes) -> str | None:
+    """The text of UTF-16 bytes (Windows' "Unicode text" exports), None for other bytes: with a
+    byte-order mark, or without one where every other byte is zero as in Latin text."""
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")):
+        encoding = "utf-16"
+    elif len(data) >= 4 and len(data) % 2 == 0 and data[1::2].count(0) > 0.9 * (len(data) // 2) \
+            and data[0::2].count(0) == 0:
+        encoding = "utf-16-le"
+    elif len(data) >= 4 and len(data) % 2 == 0 and data[0::2].count(0) > 0.9 * (len(data) // 2) \
+            and data[1::2].count(0) == 0:
+        encoding = "utf-16-be"
+    else:
+        return None
+    try:
+        return data.decode(encoding)
+    except UnicodeDecodeError:
+        return None
 
 
 def is_number(text: str) -> bool:

@@ -17,18 +17,20 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ibik_pin.exceptions import FileFormatError, InputError
+from ibik_pin.exceptions import FileFormatError, IbikWarning, InputError
 from ibik_pin.io.files import (
     check_declared_count,
     is_number,
     read_text,
     write_text_atomically,
 )
+from ibik_pin.names import normalized
 
 __all__ = ["METRES_PER_UNIT", "TrcData", "read_trc", "write_trc"]
 
@@ -132,7 +134,8 @@ def read_trc(path: str | os.PathLike[str]) -> TrcData:
         FileFormatError: The file cannot be read, or its header or a data row is ill-formed;
             the message names the line.
     """
-    lines = read_text(path, "TRC").splitlines()
+    text = read_text(path, "TRC")
+    lines = text.splitlines()
     if len(lines) < 5:
         raise FileFormatError(f"{path}: expected a 5-line TRC header, got {len(lines)} line(s)")
     if lines[0].split(maxsplit=1)[:1] != ["PathFileType"]:
@@ -162,7 +165,8 @@ def read_trc(path: str | os.PathLike[str]) -> TrcData:
         raise FileFormatError(
             f"{path}, line 4: expected 'Frame#', 'Time' then marker names, got {labels[:2]}"
         )
-    marker_names = [label.strip() for label in labels[2:] if label.strip()]
+    # Compared after normalisation: "Crème" typed with a combining accent is the same name.
+    marker_names = [normalized(label) for label in labels[2:] if label.strip()]
     if len(marker_names) != declared_markers:
         raise FileFormatError(
             f"{path}, line 4: NumMarkers is {declared_markers} but the line names "
@@ -177,6 +181,12 @@ def read_trc(path: str | os.PathLike[str]) -> TrcData:
     column_count = 2 + 3 * declared_markers
     row_numbers = [number for number in range(6, len(lines) + 1) if lines[number - 1].strip()]
     check_declared_count(path, "NumFrames", declared_frames, len(row_numbers), "data rows")
+    if row_numbers and _cut_short(text, lines[row_numbers[-1] - 1], column_count):
+        # A write interrupted mid-row: its last cell may be a prefix ("-0" of "-0.123"), not a value.
+        warnings.warn(f"{path}, line {row_numbers[-1]}: the last row is cut short (no line end, "
+                      f"{len(lines[row_numbers[-1] - 1].split(chr(9)))} of {column_count} cells): "
+                      "its frame is left out", IbikWarning, stacklevel=2)
+        row_numbers.pop()
     frame_numbers = np.empty(len(row_numbers), dtype=int)
     times = np.empty(len(row_numbers))
     coordinates = np.full((len(row_numbers), column_count - 2), np.nan)
@@ -208,6 +218,7 @@ def read_trc(path: str | os.PathLike[str]) -> TrcData:
                 f"{path}, line {number}: {marker_names[column // 3]} {'XYZ'[column % 3]}: "
                 f"expected a number, got {cells[column]!r}"
             ) from None
+    _check_unique_frames(path, frame_numbers, row_numbers)
     return TrcData(
         marker_names=marker_names,
         times=times,
@@ -217,6 +228,23 @@ def read_trc(path: str | os.PathLike[str]) -> TrcData:
         frame_numbers=frame_numbers,
         camera_rate=camera_rate,
     )
+
+
+def _cut_short(text: str, row: str, column_count: int) -> bool:
+    """Whether the file's last row was cut by an interrupted write: no line end after it, and fewer
+    cells than the header's columns."""
+    return not text.endswith("\n") and len(row.split("\t")) < column_count
+
+
+def _check_unique_frames(path, frame_numbers: np.ndarray, row_numbers: list[int]) -> None:
+    """FileFormatError naming the lines of the first frame number that appears twice."""
+    _, first_rows, counts = np.unique(frame_numbers, return_index=True, return_counts=True)
+    if np.any(counts > 1):
+        first = int(first_rows[np.argmax(counts > 1)])
+        again = next(index for index in range(first + 1, len(frame_numbers))
+                     if frame_numbers[index] == frame_numbers[first])
+        raise FileFormatError(f"{path}, lines {row_numbers[first]} and {row_numbers[again]}: expected each "
+                              f"Frame# once, found {int(frame_numbers[first])} twice")
 
 
 def write_trc(path: str | os.PathLike[str], data: TrcData) -> None:
