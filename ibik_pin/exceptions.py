@@ -24,9 +24,27 @@ class SolverError(IbikError, RuntimeError):
     """A numerical solver cannot produce a result: an IK step from non-finite task rows (NaN or
     infinity) or a failed factorisation, a calibration's least squares that failed.
 
-    A proxsuite failure on one level of the hierarchical QP is recoverable and raises nothing: that
-    level is skipped for the step and reported "failed" (solvers.LevelReport).
+    A QP backend's failure on one level of the hierarchical QP is a QPBackendError.
     """
+
+
+class QPBackendError(SolverError):
+    """A QP backend found no answer to a level of the hierarchical QP.
+
+    The solver reports it in the level's LevelReport (status "failed", `detail` the backend's own
+    status) and goes on, or raises it (HierarchicalQPSolver's raise_on_failure).
+
+    Attributes:
+        backend: the backend's name ("proxsuite", "daqp", ...).
+        status: the backend's own status, e.g. "PROXQP_MAX_ITER_REACHED after 1000 iterations".
+        level: the level's index.
+    """
+
+    def __init__(self, backend: str, status: str, level: int = -1) -> None:
+        super().__init__(f"QP backend {backend!r} found no answer to level {level}: {status}")
+        self.backend = backend
+        self.status = status
+        self.level = level
 
 
 class IbikWarning(UserWarning):

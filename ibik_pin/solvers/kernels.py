@@ -419,7 +419,7 @@ EMPTY, LEAST_SQUARES, GRADIENT = 0, 1, 2
 
 @njit(cache=True, nogil=True)
 def solve_levels(kinds, rows, targets, row_starts, adaptation, previous, steps, dq, null_basis, lower, upper,
-                 bounded, active_set, damping, feasibility, start):
+                 bounded, active_set, hand_back, damping, feasibility, start):
     """The levels from `start` on, highest first, each in the null space of those above it.
 
     Args:
@@ -435,6 +435,8 @@ def solve_levels(kinds, rows, targets, row_starts, adaptation, previous, steps, 
         lower, upper: (nv,) bounds on dq, used when `bounded` (then dq is clipped into them, the
             given dq first).
         active_set: solve a level that the bounds reach by the active-set method (else hand it back).
+        hand_back: hand back every level with a null space left, bounded or not (with `bounded`;
+            HierarchicalQPSolver.level_problems).
         damping: lambda of every level's damped least squares.
         feasibility: see primal_active_set.
         start: the first level to solve.
@@ -482,7 +484,7 @@ def solve_levels(kinds, rows, targets, row_starts, adaptation, previous, steps, 
             if not ok:
                 return dq, null_basis, index, nothing_2d, nothing_1d, nothing_2d, False
         if bounded:
-            if not within_bounds(dq + null_basis @ w, lower, upper):
+            if hand_back or not within_bounds(dq + null_basis @ w, lower, upper):
                 if kinds[index] == GRADIENT:
                     hessian = np.eye(size) / steps[index]
                     linear = -unit
@@ -492,7 +494,7 @@ def solve_levels(kinds, rows, targets, row_starts, adaptation, previous, steps, 
                         hessian[i, i] += damping * damping
                     linear = -(projected.T @ residual)
                 ended = False
-                if active_set:
+                if active_set and not hand_back:
                     w, ended = active_set_method(hessian, linear, null_basis, lower - dq, upper - dq, feasibility)
                 if not ended:
                     if coordinate and index != last:
@@ -512,12 +514,12 @@ def solve_levels(kinds, rows, targets, row_starts, adaptation, previous, steps, 
 
 @njit(cache=True, nogil=True)
 def solve_levels_step(kinds, rows, targets, row_starts, adaptation, previous, steps, dq, null_basis, lower, upper,
-                      bounded, active_set, damping, feasibility, start):
+                      bounded, active_set, hand_back, damping, feasibility, start):
     """solve_levels' dq, the level handed back and success, without the arrays of a level handed
     back: what a step reads when every level is done (as almost always). Returning those unused
     arrays to Python cost 1.6 us a call; a caller that gets a level back calls solve_levels again
     with the same arguments (a level's step norm, once set in `steps`, is kept, so the second call
     repeats the first)."""
     result = solve_levels(kinds, rows, targets, row_starts, adaptation, previous, steps, dq, null_basis, lower,
-                          upper, bounded, active_set, damping, feasibility, start)
+                          upper, bounded, active_set, hand_back, damping, feasibility, start)
     return result[0], result[2], result[6]

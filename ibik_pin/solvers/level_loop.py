@@ -4,9 +4,10 @@ The levels, highest first, each in the null space of those above it
 (:mod:`ibik_pin.solvers.nullspace`): a least-squares level's damped least squares, a gradient
 level's step along its unit projected gradient with its norm adapted by Rprop
 (:mod:`ibik_pin.solvers.step_adaptation`). With bounds (the QP), a level whose step leaves them is
-solved again with them by the primal active-set method (:mod:`ibik_pin.solvers.active_set`); one
-where that does not end is handed back to the caller (proxsuite's turn), which resumes the loop
-below it. The whole loop is one compiled call (:func:`ibik_pin.solvers.kernels.solve_levels`);
+solved again with them by the primal active-set method (:mod:`ibik_pin.solvers.active_set`) when
+that is the QP's backend, else handed back to the caller with its QP (the backend's turn; also one
+where the active-set method does not end), which resumes the loop below it. The whole loop is one
+compiled call (:func:`ibik_pin.solvers.kernels.solve_levels`);
 `PackedLevels` lays the built levels out as the arrays it reads.
 """
 
@@ -93,7 +94,8 @@ class PackedLevels:
         return True
 
     def solve(self, dq: np.ndarray, null_basis: np.ndarray, lower: np.ndarray, upper: np.ndarray, *,
-              bounded: bool, active_set: bool, damping: float, feasibility: float = 0.0, start: int = 0):
+              bounded: bool, active_set: bool, damping: float, feasibility: float = 0.0, start: int = 0,
+              hand_back: bool = False):
         """solve_levels on these levels; raises SolverError if a factorisation failed.
 
         Returns:
@@ -103,7 +105,7 @@ class PackedLevels:
         arguments = (self.kinds, self.rows, self.targets, self.row_starts, self.adaptation, self.previous,
                      self.steps, np.ascontiguousarray(dq, dtype=np.float64),
                      np.ascontiguousarray(null_basis, dtype=np.float64), lower, upper, bounded, active_set,
-                     damping, feasibility, start)
+                     hand_back, damping, feasibility, start)
         dq, stopped, ok = solve_levels_step(*arguments)
         if not ok:
             raise SolverError(f"the factors of level {stopped}'s projected Jacobian failed "

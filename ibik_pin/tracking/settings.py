@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ibik_pin.solvers import DEFAULT_QP_SOLVER
 from ibik_pin.tracking.stack import Stack
 
 __all__ = ["IMAGE_MOVES", "IMAGE_STOPS", "TrackingSettings"]
@@ -21,6 +22,10 @@ class TrackingSettings:
 
     Attributes:
         method: solver scheme: "qp" (default), "stack", "liegeois" or "ik".
+        qp_solver: the backend of the "qp" scheme's level QPs: "active_set" (default), "proxsuite",
+            or a solver qpsolvers has installed ("daqp", "proxqp", ...):
+            ibik_pin.solvers.available_qp_solvers() lists them. A stack file's `qp_solver` key
+            overrides it.
         iterations: solver steps per frame (the paper: 15).
         first_frame_iterations: steps for the first frame, which starts from the neutral pose:
             that many blind (no image) then that many with every level.
@@ -74,6 +79,7 @@ class TrackingSettings:
     """
 
     method: str = "qp"
+    qp_solver: str = DEFAULT_QP_SOLVER
     iterations: int = 15
     first_frame_iterations: int = 100
     first_frame_starts: int = 1

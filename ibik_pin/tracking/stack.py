@@ -15,6 +15,8 @@ as Pink weighs every task of its one QP. An image criterion alone in its solver 
 along its gradient with the solver's step adaptation; sharing a level with other tasks, it becomes
 one weighted row asking for a step of `step` along its gradient (tasks.criterion_step).
 
+A top-level ``qp_solver = "NAME"`` picks the QP backend of the "qp" scheme (TrackingSettings.qp_solver).
+
 Stacks are read from TOML (``Stack.from_toml``; the format is in the README, "Priority stacks",
 and ibik_pin/data/default_stack.toml is the stack `ibik track` uses by default). Every error names
 the file, the level and the key.
@@ -32,6 +34,7 @@ from typing import Any
 
 from ibik_pin.exceptions import FileFormatError, InputError
 from ibik_pin.io.files import read_text
+from ibik_pin.solvers import available_qp_solvers
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -103,6 +106,7 @@ class Stack:
 
     levels: tuple[StackLevel, ...]
     source: str = "<stack>"
+    qp_solver: str | None = None  # the top-level key `qp_solver`: TrackingSettings.qp_solver's override
 
     @classmethod
     def from_toml(cls, path: str | Path) -> Stack:
@@ -135,15 +139,21 @@ class Stack:
 
     @classmethod
     def from_dict(cls, document: Mapping[str, Any], source: str = "<stack>") -> Stack:
-        """A stack from parsed TOML: ``{"level": [{"name": ..., "strict": ..., "tasks": [{...}]}]}``."""
-        unknown = [key for key in document if key != "level"]
+        """A stack from parsed TOML: ``{"level": [{"name": ..., "strict": ..., "tasks": [{...}]}]}``,
+        and optionally ``"qp_solver": NAME`` (the QP backend, one of available_qp_solvers())."""
+        unknown = [key for key in document if key not in ("level", "qp_solver")]
         if unknown:
-            raise StackError(f"{source}: key {unknown[0]!r}: unknown top-level key; a stack holds [[level]] tables")
+            raise StackError(f"{source}: key {unknown[0]!r}: unknown top-level key; a stack holds [[level]] "
+                             "tables and optionally qp_solver")
+        qp_solver = document.get("qp_solver")
+        if qp_solver is not None and qp_solver not in available_qp_solvers():
+            raise StackError(f"{source}: key 'qp_solver': expected one of {', '.join(available_qp_solvers())}, "
+                             f"found {qp_solver!r}")
         levels = document.get("level", [])
         if not isinstance(levels, list) or not levels:
             raise StackError(f"{source}: key 'level': the stack is empty; expected at least one [[level]] table")
         parsed = tuple(_level(source, index, table) for index, table in enumerate(levels, start=1))
-        stack = cls(parsed, source)
+        stack = cls(parsed, source, qp_solver)
         stack._check()
         return stack
 

@@ -65,14 +65,17 @@ class Tracker:
         self.stack = settings.stack or Stack.default()
         self.stack.check_names(body.keypoints, [camera.name for camera in cameras] if cameras else None)
         image = self.stack.image
-        # The stack's image task, where it says, overrides the settings and picks the cameras.
+        # The stack's image task, where it says, overrides the settings and picks the cameras; its
+        # qp_solver key, the QP backend.
         self.settings = replace(settings, criterion=image.criterion or settings.criterion,
                                 image_step=image.step or settings.image_step) if image else settings
+        if self.stack.qp_solver is not None:
+            self.settings = replace(self.settings, qp_solver=self.stack.qp_solver)
         self.cameras = [camera for camera in cameras if image is None or image.views is None
                         or camera.name in image.views]
         model = body.model
         self.limits = JointLimits(model)
-        self.solver = make_solver(self.settings.method, limits=self.limits)
+        self.solver = make_solver(self.settings.method, limits=self.limits, qp_solver=self.settings.qp_solver)
         self.image_task = ImageTask(body, (), samples_per_segment=self.settings.samples_per_segment,
                                     max_step_size=self.settings.image_step)
         if self.settings.criterion not in CRITERIA:
