@@ -1,8 +1,11 @@
-"""Pose2Sim calibration files (TOML): read and write calibrated pinhole cameras.
+"""Calibration files: read calibrated pinhole cameras, write Pose2Sim's TOML.
 
-One section per camera with the keys ``name``, ``size`` = [width, height], ``matrix`` (3 x 3),
-``distortions`` (k1, k2, p1, p2), ``rotation`` (Rodrigues vector, world to camera), ``translation``
-[m] and ``fisheye``. Pose2Sim's world is Z-up; its TRC files are Y-up.
+Pose2Sim's TOML (also Anipose's, whose layout Pose2Sim took): one section per camera with the keys
+``name``, ``size`` = [width, height], ``matrix`` (3 x 3), ``distortions`` (k1, k2, p1, p2[, k3]),
+``rotation`` (Rodrigues vector, world to camera), ``translation`` [m] and ``fisheye``. Pose2Sim's
+world is Z-up; its TRC files are Y-up. `read_calibration` also reads, recognised by content, the
+formats of :mod:`ibik_pin.io.calibration_formats` (Qualisys .qca.txt, EasyMocap intri.yml +
+extri.yml).
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ import tomli_w
 
 from ibik_pin.checks import as_finite_array, as_image_size
 from ibik_pin.exceptions import FileFormatError, InputError
+from ibik_pin.io.calibration_formats import read_easymocap, read_qualisys
 from ibik_pin.io.files import PathLike, read_text, write_text_atomically
 from ibik_pin.vision.pinhole import PinholeCamera
 
@@ -24,16 +28,21 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - exercised on Python 3.10 only
     import tomli as tomllib
 
-__all__ = ["POSE2SIM_TRC_TO_WORLD", "read_calibration", "write_calibration"]
+__all__ = ["CALIBRATION_FORMATS", "POSE2SIM_TRC_TO_WORLD", "read_calibration", "write_calibration"]
+
+#: The calibration formats `read_calibration` recognises, as named in its errors.
+CALIBRATION_FORMATS = ("Pose2Sim or Anipose TOML", "Qualisys .qca.txt", "EasyMocap intri.yml + extri.yml")
 
 # Pose2Sim sections that do not describe a camera.
 _NON_CAMERA_SECTIONS = frozenset({"metadata", "capture_volume", "charuco", "checkerboard"})
 
 
 def read_calibration(path: PathLike) -> list[PinholeCamera]:
-    """Cameras from a Pose2Sim calibration TOML file, in file order.
+    """Cameras from a calibration file, its format recognised by its content (CALIBRATION_FORMATS).
 
-    Every top-level table except Pose2Sim's non-camera sections (``metadata``,
+    Qualisys' XML and EasyMocap's YAML (`path` one of its two files, or their folder) are read as
+    :mod:`ibik_pin.io.calibration_formats` says. In a TOML file (Pose2Sim, Anipose), cameras come
+    in file order: every top-level table except Pose2Sim's non-camera sections (``metadata``,
     ``capture_volume``, ``charuco``, ``checkerboard``) is a camera with the keys ``name``,
     ``size`` [w, h], ``matrix`` (3 x 3), ``distortions`` (4 values k1, k2, p1, p2, or 5 with
     k3), ``rotation`` (Rodrigues, world to camera), ``translation`` [m] and optionally
@@ -51,12 +60,20 @@ def read_calibration(path: PathLike) -> list[PinholeCamera]:
             a name, or no camera section; the message names the file, section and key.
     """
     path = Path(path)
+    if path.is_dir():
+        return read_easymocap(path)
     text = read_text(path, "calibration")  # a byte-order mark, which tomllib refuses, is dropped
+    head = text.lstrip()[:4096]
+    if head.startswith("<") and "<cameras" in head:
+        return read_qualisys(path, text)
+    if head.startswith("%YAML"):
+        return read_easymocap(path)
     try:
         document = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise FileFormatError(
-            f"calibration file '{path}': expected valid TOML, found a syntax error: {error}"
+            f"calibration file '{path}': expected valid TOML (or one of the other formats read: "
+            f"{', '.join(CALIBRATION_FORMATS[1:])}), found a syntax error: {error}"
         ) from None
 
     cameras: list[PinholeCamera] = []
