@@ -57,11 +57,12 @@ from realdata.clips import CLIPS
 from realdata.inputs import prepare_inputs
 from realdata.runner import run_variant, variant
 
+from ibik_pin.app.job import TrackJob
+from ibik_pin.app.track import prepare_body
 from ibik_pin.io.files import strict_json
 from ibik_pin.io.trc import read_trc
 from ibik_pin.solvers.hqp import HierarchicalQPSolver
 from ibik_pin.tasks.base import GradientTask
-from ibik_pin.tracking.pipeline import TrackJob, prepare_body
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 BOXING = CLIPS["boxing_a"]

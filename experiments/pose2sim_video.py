@@ -39,20 +39,21 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ibik_pin.evaluation import ESTIMATED
-from ibik_pin.exceptions import IbikWarning
-from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, read_calibration
-from ibik_pin.io.trc import TrcData, read_trc, write_trc
-from ibik_pin.io.video import read_frames
-from ibik_pin.tracking.pipeline import TrackJob, run_track
-from ibik_pin.tracking.settings import TrackingSettings
-from ibik_pin.tracking.video_inputs import (
+from ibik_pin.app.job import TrackJob
+from ibik_pin.app.track import run_track
+from ibik_pin.app.video_inputs import (
     points_inside,
     read_videos,
     refitted_cameras,
     restrict_to_subject,
     triangulated_trc,
 )
+from ibik_pin.evaluation import ESTIMATED
+from ibik_pin.exceptions import IbikWarning
+from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, read_calibration
+from ibik_pin.io.trc import TrcData, read_trc, write_trc
+from ibik_pin.io.video import read_frames
+from ibik_pin.tracking.settings import TrackingSettings
 from ibik_pin.vision.camera import cameras_in_frame
 from ibik_pin.vision.mask_store import CroppedMasks
 

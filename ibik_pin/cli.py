@@ -27,14 +27,14 @@ import typing
 import warnings
 from typing import TYPE_CHECKING
 
-from ibik_pin.batch.command import add_batch_arguments
+from ibik_pin.app.batch.command import add_batch_arguments
 from ibik_pin.exceptions import IbikError
 from ibik_pin.solvers import SOLVERS
 
 if TYPE_CHECKING:
     from collections.abc import Iterator
 
-    from ibik_pin.tracking.pipeline import TrackJob
+    from ibik_pin.app.job import TrackJob
 
 # The subcommands' modules (tracking, I/O, rendering, plots, the demo's synthetic data) are
 # imported by the handlers that need them, so that `ibik --help` and argument errors answer at
@@ -116,7 +116,7 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _job(arguments: argparse.Namespace) -> TrackJob:
-    from ibik_pin.tracking.pipeline import TrackJob
+    from ibik_pin.app.job import TrackJob
     from ibik_pin.tracking.settings import TrackingSettings
     from ibik_pin.tracking.stack import Stack
 
@@ -158,28 +158,11 @@ def _add_calibrate_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _calibrate(arguments: argparse.Namespace) -> None:
     """`ibik calibrate`: fit the subject on the static trial, write its URDF and figures, print them."""
+    from ibik_pin.app.calibrate import run_calibrate
 
-    from ibik_pin.exceptions import IbikWarning
-    from ibik_pin.human import load_human
-    from ibik_pin.subject.calibration import calibrate_static_trial, parse_frame_range
-    from ibik_pin.subject.calibration_result import write_calibration_figures
-    from ibik_pin.subject.urdf import write_subject_urdf
-
-    frame_range = parse_frame_range(arguments.frames) if arguments.frames else (None, None)
-    if arguments.out.suffix.lower() != ".urdf":
-        raise IbikError(f"--out: expected a file name ending in .urdf, got {str(arguments.out)!r}")
-    for option, given in (("the static trial", arguments.static), ("--model", arguments.model)):
-        if given is not None and arguments.out.resolve() == Path(given).resolve():
-            raise IbikError(f"--out {arguments.out}: it is {option}, which writing the subject would replace; "
-                            "choose another file name")
-    body = load_human(arguments.model) if arguments.model is not None else load_human()
-    result = calibrate_static_trial(arguments.static, body, frame_range)
-    notes = write_subject_urdf(result.body, arguments.out)
-    figures = write_calibration_figures(arguments.out, arguments.static, body.urdf_path, result, notes)
-    for note in notes:
-        warnings.warn(note, IbikWarning, stacklevel=1)
-    print(result.table())
-    print(f"wrote {arguments.out} and {figures}")
+    run = run_calibrate(arguments.static, arguments.out, arguments.model, arguments.frames)
+    print(run.result.table())
+    print(f"wrote {arguments.out} and {run.figures}")
 
 
 class _OneLineParser(argparse.ArgumentParser):
@@ -282,7 +265,7 @@ def main(argv: list[str] | None = None) -> int:
 def _run(arguments: argparse.Namespace) -> int:
     try:
         if arguments.command == "track":
-            from ibik_pin.tracking.pipeline import run_track
+            from ibik_pin.app.track import run_track
 
             report = run_track(_job(arguments))
             if not arguments.quiet:
@@ -292,11 +275,11 @@ def _run(arguments: argparse.Namespace) -> int:
         elif arguments.command == "calibrate":
             _calibrate(arguments)
         elif arguments.command == "batch":
-            from ibik_pin.batch.command import run_batch_command
+            from ibik_pin.app.batch.command import run_batch_command
 
             return run_batch_command(arguments, _job)
         else:
-            from ibik_pin.demo import run_demo
+            from ibik_pin.app.demo import run_demo
 
             run_demo(arguments.out, quiet=arguments.quiet)
     except (IbikError, OSError) as error:

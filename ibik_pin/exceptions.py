@@ -6,7 +6,17 @@ class IbikError(Exception):
 
 
 class InputError(IbikError, ValueError):
-    """A user-supplied value, array or file content is not what was expected."""
+    """A user-supplied value, array or file content is not what was expected.
+
+    Attributes:
+        parameter: the name of the API parameter the error is about, which starts the message
+            ("names: unknown camera name(s) ..."), or None; a program that takes the value under
+            another name (the `ibik` command's options) puts its own name there instead.
+    """
+
+    def __init__(self, message: str = "", *, parameter: str | None = None) -> None:
+        super().__init__(message)
+        self.parameter = parameter
 
 
 class FileFormatError(InputError):

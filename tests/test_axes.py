@@ -1,20 +1,20 @@
-"""Tests of ibik_pin.tracking.axes: the TRC's axis convention told from the cameras."""
+"""Tests of ibik_pin.app.axes: the TRC's axis convention told from the cameras."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from ibik_pin.exceptions import IbikWarning, InputError
-from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD
-from ibik_pin.synthetic.rig import humaneva_rig
-from ibik_pin.tracking.axes import (
+from ibik_pin.app.axes import (
     TRC_TO_MODEL,
     AxesChoice,
     choose_axes,
     sample_frames,
     score_axes,
 )
+from ibik_pin.exceptions import IbikWarning, InputError
+from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD
+from ibik_pin.synthetic.rig import humaneva_rig
 
 NAMES = ["Head", "Hip", "LAnkle", "RAnkle"]
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ibik_pin.batch.discovery import Subject, find_trials
+from ibik_pin.app.batch.discovery import Subject, find_trials
 
 
 def touch(*paths: Path) -> None:

@@ -8,10 +8,10 @@ import sys
 
 import pytest
 
-from ibik_pin.batch.summary import TrialOutcome, write_summary
-from ibik_pin.batch.tasks import SubjectOutcome, calibrate_subject_once, completed_outcome, run_trial
+from ibik_pin.app.batch.summary import TrialOutcome, write_summary
+from ibik_pin.app.batch.tasks import SubjectOutcome, calibrate_subject_once, completed_outcome, run_trial
+from ibik_pin.app.job import TrackJob
 from ibik_pin.synthetic.trials import write_trial_tree
-from ibik_pin.tracking.pipeline import TrackJob
 from ibik_pin.tracking.settings import TrackingSettings
 
 
@@ -75,12 +75,12 @@ def test_a_calibrated_subject_is_not_calibrated_again(root, tmp_path):
 
 
 def test_an_error_not_of_the_package_is_a_failed_row_that_names_its_type(root, tmp_path, monkeypatch):
-    from ibik_pin.tracking import pipeline
+    from ibik_pin.app import outputs
 
     def disk_full(*arguments, **keywords):
         raise OSError(28, "No space left on device")  # what a full disk gives while writing q.csv
 
-    monkeypatch.setattr(pipeline, "write_q_csv", disk_full)
+    monkeypatch.setattr(outputs, "write_q_csv", disk_full)
     outcome = run_trial("P1/walk_1", job(root, tmp_path / "out"), None)
 
     assert outcome.status == "failed" and outcome.error.startswith("OSError: ")

@@ -9,6 +9,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from ibik_pin.app.calibrate import parse_frame_range
+from ibik_pin.app.job import TrackJob
+from ibik_pin.app.track import prepare_body
 from ibik_pin.cli import main
 from ibik_pin.exceptions import InputError, UnknownNameError
 from ibik_pin.human import human_urdf_path, load_human
@@ -19,10 +22,8 @@ from ibik_pin.subject.calibration import (
     CalibrationSettings,
     calibrate_static_trial,
     calibrate_subject,
-    parse_frame_range,
 )
 from ibik_pin.subject.urdf import write_subject_urdf
-from ibik_pin.tracking.pipeline import TrackJob, prepare_body
 
 MILLIMETRE = 1e-3
 # Known segment scales; the pelvis 2 cm wider (the hip centres 2 cm farther apart).

@@ -240,6 +240,7 @@ def test_select_cameras_returns_the_requested_cameras_in_the_given_order():
 
 def test_select_cameras_lists_the_available_names_for_an_unknown_one():
     cameras = [tiny_camera(name) for name in "ab"]
-    expected = r"--cameras: unknown camera name\(s\) \['z'\]; the calibration has \['a', 'b'\]"
-    with pytest.raises(UnknownNameError, match=expected):
+    expected = r"^names: unknown camera name\(s\) \['z'\]; the calibration has \['a', 'b'\]"
+    with pytest.raises(UnknownNameError, match=expected) as raised:
         select_cameras(cameras, ["a", "z"])
+    assert raised.value.parameter == "names"

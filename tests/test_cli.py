@@ -13,8 +13,8 @@ import cv2
 import numpy as np
 import pytest
 
+from ibik_pin.app.demo import ESTIMATED, prepare_demo_inputs
 from ibik_pin.cli import main
-from ibik_pin.demo import ESTIMATED, prepare_demo_inputs
 from ibik_pin.evaluation import mean_joint_errors_mm
 from ibik_pin.exceptions import IbikWarning
 from ibik_pin.io.calibration import read_calibration, write_calibration

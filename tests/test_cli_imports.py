@@ -13,8 +13,9 @@ import pytest
 
 # Modules `ibik --help` must not load: plotting, the tracking pipeline and what it writes, the
 # demo's synthetic data, the paper's experiments, Dask.
-HEAVY_PREFIXES = ("matplotlib", "ibik_pin.synthetic", "ibik_pin.demo", "ibik_pin.tracking", "ibik_pin.viz",
-                  "experiments", "paper", "dask", "distributed")
+HEAVY_PREFIXES = ("matplotlib", "ibik_pin.synthetic", "ibik_pin.app.demo", "ibik_pin.app.track", "ibik_pin.app.outputs",
+                  "ibik_pin.tracking", "ibik_pin.readahead", "ibik_pin.viz", "experiments", "paper", "dask",
+                  "distributed")
 
 
 def run_python(code: str) -> str:

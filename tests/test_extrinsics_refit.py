@@ -93,8 +93,9 @@ def test_what_cannot_be_checked_is_refused(cameras, detections, views, refit, pa
 def test_a_camera_far_from_its_calibration_is_refused(cameras, detections):
     given = list(cameras)
     given[1] = turned(cameras[1], turn_deg=12.0)
-    with pytest.raises(InputError, match=f"--refit-cameras {cameras[1].name}: .* turn it 12.0 deg .* calibrate again"):
+    with pytest.raises(InputError, match=f"refit {cameras[1].name}: .* turn it 12.0 deg .* calibrate again") as raised:
         refit_extrinsics(given, *detections, refit=[cameras[1].name])
+    assert raised.value.parameter == "refit"
 
 
 def test_unused_detections_do_not_count(cameras, detections):

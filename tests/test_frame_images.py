@@ -415,8 +415,8 @@ def test_a_parent_waiting_on_a_slower_child_prepares_frames_the_child_has_not_re
     figures of every frame end up in the parent's reader, none read again for the report."""
     import time
 
+    from ibik_pin.app.video_inputs import SilhouetteQualityReader
     from ibik_pin.readahead.image_process import MAX_SLOTS
-    from ibik_pin.tracking.video_inputs import SilhouetteQualityReader
 
     cameras, masks = rig
     frames = 3 * MAX_SLOTS  # the child, once fast, gets past frames it has skipped: its jobs still find their images

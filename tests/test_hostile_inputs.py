@@ -27,15 +27,16 @@ import cv2
 import numpy as np
 import pytest
 
+from ibik_pin.app.demo import prepare_demo_inputs
+from ibik_pin.app.job import TrackJob
+from ibik_pin.app.outdir import MARKER, OutputFolderError
+from ibik_pin.app.track import run_track
 from ibik_pin.cli import Terminated, main
-from ibik_pin.demo import prepare_demo_inputs
 from ibik_pin.exceptions import FileFormatError, IbikError, IbikWarning, InputError
 from ibik_pin.human import human_urdf_path
 from ibik_pin.io.calibration import read_calibration, write_calibration
 from ibik_pin.io.files import MAX_INPUT_BYTES
 from ibik_pin.io.trc import read_trc, write_trc
-from ibik_pin.tracking.outdir import MARKER, OutputFolderError
-from ibik_pin.tracking.pipeline import TrackJob, run_track
 from ibik_pin.tracking.settings import TrackingSettings
 
 REPOSITORY = Path(__file__).resolve().parents[1]

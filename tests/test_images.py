@@ -8,10 +8,11 @@ import cv2
 import numpy as np
 import pytest
 
+from ibik_pin.app.silhouette_files import silhouettes_from_video
 from ibik_pin.exceptions import EmptySilhouetteWarning, FileFormatError, InputError
 from ibik_pin.io.masks import list_mask_files, read_mask
 from ibik_pin.io.video import VideoReader
-from ibik_pin.vision.segmentation import TemporalMajority, silhouettes_from_video
+from ibik_pin.vision.segmentation import TemporalMajority
 from ibik_pin.vision.support import SupportImage, obstacle_support, support_from_mask
 from tests.paths import SHARED_DATA
 

@@ -12,8 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ibik_pin.app.demo import prepare_demo_inputs
+from ibik_pin.app.job import TrackJob
+from ibik_pin.app.silhouette_files import load_silhouettes
+from ibik_pin.app.track import prepare_body
 from ibik_pin.configuration import Configuration
-from ibik_pin.demo import prepare_demo_inputs
 from ibik_pin.exceptions import IbikWarning
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, read_calibration
 from ibik_pin.io.trc import read_trc
@@ -22,9 +25,7 @@ from ibik_pin.tasks import FramePositionTask, PostureTask
 from ibik_pin.tasks.com import CenterOfMassTask
 from ibik_pin.tasks.criterion_step import CriterionStepTask
 from ibik_pin.tracking.levels import StackPlan
-from ibik_pin.tracking.pipeline import TrackJob, prepare_body
 from ibik_pin.tracking.settings import TrackingSettings
-from ibik_pin.tracking.silhouette_files import load_silhouettes
 from ibik_pin.tracking.stack import Stack
 from ibik_pin.tracking.tracker import Tracker
 from ibik_pin.vision.camera import cameras_in_frame
@@ -160,7 +161,7 @@ def test_a_weighted_one_level_stack_is_solved_as_one_qp_level(walk):
     image_rows = [task for task in plan.solver_levels[0] if isinstance(task, CriterionStepTask)]
     assert len(image_rows) == 1 and image_rows[0].weight == 0.5
     assert isinstance(tracker.solver, HierarchicalQPSolver)
-    # proxsuite problems, if needed, for the one level only: level 0 in the targets-only steps, and
+    # proxsuite's QP objects, if any, for the one level only: level 0 in the targets-only steps, and
     # level 1 under the trunk hold (level 0) in the image steps.
     assert {level for level, _, _ in getattr(tracker.solver.backend, "qps", {})} <= {0, 1}
     assert all(len(reports) == 1 for reports in result.level_reports)  # one level solved per frame

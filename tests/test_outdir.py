@@ -6,7 +6,7 @@ import multiprocessing
 
 import pytest
 
-from ibik_pin.tracking.outdir import MARKER, OutputFolderError, check_outdir, make_staging, publish
+from ibik_pin.app.outdir import MARKER, OutputFolderError, check_outdir, make_staging, publish
 
 
 def staged(out, label: str):

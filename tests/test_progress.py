@@ -9,8 +9,8 @@ import sys
 
 import pytest
 
+from ibik_pin.app.demo import prepare_demo_inputs
 from ibik_pin.cli import main
-from ibik_pin.demo import prepare_demo_inputs
 
 # tqdm's last drawing of a finished bar: "tracking: 100%|####| 10/10 [00:00<00:00, 22.9frame/s]";
 # below 1 frame/s the rate reads "1.23s/frame".

@@ -1,4 +1,4 @@
-"""Tests of ibik_pin.tracking.report: the typed report, its strict JSON and the console summary."""
+"""Tests of ibik_pin.app.report: the typed report, its strict JSON and the console summary."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ import json
 import numpy as np
 import pytest
 
-from ibik_pin.tracking.axes import AxesChoice, AxesScore
+from ibik_pin.app.axes import AxesChoice, AxesScore
+from ibik_pin.app.report import ResidualStats, TrackingReport
 from ibik_pin.tracking.outcomes import LevelOutcome
-from ibik_pin.tracking.report import ResidualStats, TrackingReport
 from ibik_pin.tracking.result import TrackingResult
 from ibik_pin.tracking.settings import TrackingSettings
 

@@ -1,5 +1,5 @@
 """Triangulation of 2D keypoints (vision.triangulation) and the subject's part of a mask
-(tracking.video_inputs.keep_subject), on exact projections of Pose2Sim's own triangulation of its
+(app.video_inputs.keep_subject), on exact projections of Pose2Sim's own triangulation of its
 demo into the demo's four calibrated cameras (no detector involved: these run everywhere)."""
 
 from __future__ import annotations
@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from ibik_pin.app.video_inputs import keep_subject
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, read_calibration
 from ibik_pin.io.trc import read_trc
-from ibik_pin.tracking.video_inputs import keep_subject
 from ibik_pin.vision.camera import cameras_in_frame
 from ibik_pin.vision.learned_pose import LANDMARKS
 from ibik_pin.vision.triangulation import (

@@ -14,15 +14,15 @@ import cv2
 import numpy as np
 import pytest
 
+from ibik_pin.app.job import TrackJob
+from ibik_pin.app.video_inputs import read_videos, restrict_to_subject
 from ibik_pin.cli import main
 from ibik_pin.exceptions import InputError
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, read_calibration
 from ibik_pin.io.trc import read_trc
 from ibik_pin.io.video import read_frames
-from ibik_pin.tracking.pipeline import TrackJob
-from ibik_pin.tracking.video_inputs import read_videos, restrict_to_subject
 from ibik_pin.vision.camera import cameras_in_frame
-from ibik_pin.vision.learned_pose import MEDIAPIPE_INSTALL, detect_pose_in_video, learned_pose_available
+from ibik_pin.vision.learned_pose import MEDIAPIPE_INSTALL, detect_pose_in_frames, learned_pose_available
 from tests.paths import TEST_DATA
 
 VIDEOS = TEST_DATA / "pose2sim_video"
@@ -172,7 +172,7 @@ def test_a_camera_named_to_refit_is_turned_and_written(tmp_path):
 
 @needs_mediapipe
 def test_detection_finds_one_person_per_frame_of_each_camera():
-    pose = detect_pose_in_video(VIDEOS / "cam04.mp4", max_frames=4)
+    pose = detect_pose_in_frames(read_frames(VIDEOS / "cam04.mp4", max_frames=4))
     assert pose.keypoints.shape == (4, 33, 2) and np.isfinite(pose.keypoints).all()
     assert len(pose.masks) == 4 and pose.masks[0].shape == (480, 272)
     assert (pose.visibility[:, [11, 12, 23, 24]] > 0.5).all()  # shoulders and hips

@@ -27,9 +27,10 @@ from pathlib import Path
 import numpy as np
 from paper.section4 import DEFECT_MASK_FILTER_RADIUS
 
+from ibik_pin.app.job import TrackJob
+from ibik_pin.app.track import run_track
 from ibik_pin.exceptions import InputError, UnknownNameError
 from ibik_pin.io.trc import read_trc, write_trc
-from ibik_pin.tracking.pipeline import TrackJob, run_track
 from ibik_pin.tracking.settings import TrackingSettings
 from realdata.clips import CLIPS, ESTIMATED
 from realdata.inputs import CONDITIONS, ClipInputs, prepare_inputs

@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ibik_pin.app.job import TrackJob
+from ibik_pin.app.track import run_track
 from ibik_pin.evaluation import ESTIMATED, mean_joint_errors_mm
 from ibik_pin.human import load_human
 from ibik_pin.io.asf_amc import read_asf_amc
@@ -23,10 +25,9 @@ from ibik_pin.subject.scaling import scale_human, segment_lengths_from_keypoints
 from ibik_pin.synthetic.dataset import write_dataset
 from ibik_pin.synthetic.mocap import keypoints_from_motion, pose_model_to_keypoints
 from ibik_pin.synthetic.rig import humaneva_rig
-from ibik_pin.tracking.pipeline import TrackJob, run_track
 from ibik_pin.tracking.settings import TrackingSettings
 
-DATA = Path(__file__).resolve().parent / "data"
+DATA = Path(__file__).resolve().parents[1] / "data"
 
 
 def prepare_demo_inputs(folder: Path, views: int = 4, frame_step: int = 2, seed: int = 0):

@@ -97,7 +97,7 @@ def check_cameras_see_targets(cameras: Sequence, targets_trc_m: np.ndarray, fram
         cameras: cameras that project model-frame points.
         targets_trc_m: (F, K, 3) targets as the TRC holds them [m].
         frames: the frames to look at.
-        trc_to_model: one (3, 3) rotation per convention in question (tracking.axes.TRC_TO_MODEL).
+        trc_to_model: one (3, 3) rotation per convention in question (app.axes.TRC_TO_MODEL).
     """
     points_trc = targets_trc_m[list(frames)].reshape(-1, 3)
     points_trc = points_trc[np.isfinite(points_trc).all(axis=1)]

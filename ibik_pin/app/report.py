@@ -17,12 +17,12 @@ from typing import Any
 
 import numpy as np
 
+from ibik_pin.app.axes import AXES_DESCRIPTIONS, AxesChoice
+from ibik_pin.app.input_reports import SilhouetteQuality, TriangulationReport
+from ibik_pin.app.report_units import FRAME_NUMBERING, UNITS
 from ibik_pin.io.files import json_ready, strict_json, write_text_atomically
-from ibik_pin.tracking.axes import AXES_DESCRIPTIONS, AxesChoice
-from ibik_pin.tracking.report_units import FRAME_NUMBERING, UNITS
 from ibik_pin.tracking.result import TrackingResult
 from ibik_pin.tracking.settings import TrackingSettings
-from ibik_pin.tracking.video_inputs import SilhouetteQuality, TriangulationReport
 from ibik_pin.vision.extrinsics_refit import ExtrinsicsRefit
 
 
@@ -60,7 +60,7 @@ class ResidualStats:
 
 @dataclass
 class TrcAxesReport:
-    """The axis convention the TRC files were read and written in (tracking.axes).
+    """The axis convention the TRC files were read and written in (app.axes).
 
     Attributes:
         used: "y-up" or "z-up".
@@ -200,7 +200,7 @@ class TrackingReport:
         frames_with_dropped_targets: TRC frame number -> targets absent in that frame (outliers
             included).
         frames_with_outlier_targets: TRC frame number -> targets dropped in that frame because they
-            lay metres from the rest of the body (tracking.input_checks.drop_outlier_targets).
+            lay metres from the rest of the body (app.input_checks.drop_outlier_targets).
         frames_with_disabled_views: TRC frame number -> cameras whose silhouette was empty.
         solver_levels: per level of the priority stack, its status, residual and sacrifice at
             each frame.
@@ -209,9 +209,9 @@ class TrackingReport:
         solve_seconds: wall time of the solves [s].
         loop_seconds: wall time of the whole frame loop [s] (see :data:`UNITS`).
         silhouettes: how well each camera's silhouettes hold the projected targets, and their
-            area over time (tracking.video_inputs.SilhouetteQuality); None without silhouettes.
+            area over time (app.input_reports.SilhouetteQuality); None without silhouettes.
         triangulation: with --videos and no --targets, how the targets were triangulated
-            (tracking.video_inputs.TriangulationReport); None when they were given.
+            (app.input_reports.TriangulationReport); None when they were given.
         extrinsics: the check of the cameras' poses against each other's detections, and the
             re-fitted ones (vision.extrinsics_refit.ExtrinsicsRefit); None when it did not run.
         units: :data:`UNITS`, written into the file so that it describes itself.

@@ -1,5 +1,5 @@
 """What every figure of report.json means: the unit and meaning written as its "units" entry, and
-how its frames are numbered (ibik_pin.tracking.report writes both)."""
+how its frames are numbered (ibik_pin.app.report writes both)."""
 
 from __future__ import annotations
 

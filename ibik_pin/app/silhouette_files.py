@@ -5,24 +5,28 @@ targets' frame count before any solving."""
 from __future__ import annotations
 
 import warnings
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import cv2
 import numpy as np
 from tqdm import tqdm
 
+from ibik_pin.app.job import TrackJob
 from ibik_pin.exceptions import FileFormatError, IbikWarning, InputError
-from ibik_pin.io.masks import IMAGE_SUFFIXES, list_mask_files, read_mask
-from ibik_pin.io.video import VideoReader
+from ibik_pin.io.files import PathLike
+from ibik_pin.io.masks import IMAGE_SUFFIXES, list_mask_files, read_image, read_mask
+from ibik_pin.io.video import VideoReader, read_frames
 from ibik_pin.vision.mask_store import CroppedMasks
-from ibik_pin.vision.segmentation import silhouettes_from_video
+from ibik_pin.vision.segmentation import silhouettes_by_background_subtraction
 
 if TYPE_CHECKING:
-    from ibik_pin.tracking.pipeline import TrackJob
     from ibik_pin.vision.learned_pose import VideoPose
 
-__all__ = ["Silhouettes", "camera_folder_entries", "check_video_size", "fit_to_size", "load_silhouettes"]
+__all__ = ["Silhouettes", "camera_folder_entries", "check_video_size", "fit_to_size", "load_silhouettes",
+           "silhouettes_from_video"]
 
 VIDEO_SUFFIXES = {".mp4", ".avi", ".mov", ".mkv", ".m4v"}
 # Encoders round frame sizes to macroblocks of 16 px: a video up to 15 px off its calibration's
@@ -116,7 +120,7 @@ def check_video_size(path: Path, camera) -> tuple[int, int]:
 def load_silhouettes(job: TrackJob, cameras: list, frame_count: int, progress: bool,
                      learned: list[VideoPose] | None = None) -> Silhouettes:
     """Mask files or video silhouettes for every camera, checked against the targets' frame count.
-    `learned`: MediaPipe's detections of the videos (tracking.video_inputs), whose masks are used
+    `learned`: MediaPipe's detections of the videos (app.video_inputs), whose masks are used
     instead of background subtraction."""
     names = [camera.name for camera in cameras]
     sizes = [tuple(camera.size) for camera in cameras]
@@ -166,3 +170,35 @@ def fit_to_size(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     rows, columns = min(height, image.shape[0]), min(width, image.shape[1])
     fitted[:rows, :columns] = image[:rows, :columns]
     return fitted
+
+
+def silhouettes_from_video(video_path: PathLike, background_paths: Sequence[PathLike] | None = None,
+                           **options) -> CroppedMasks:
+    """The silhouettes of a video file by background subtraction
+    (:func:`~ibik_pin.vision.segmentation.silhouettes_by_background_subtraction`, whose keyword
+    `options` it takes), learnt on `background_paths`: images or videos of the empty scene, each
+    checked against the video's size.
+
+    Raises:
+        FileFormatError: the video or a background file cannot be read.
+        InputError: a background has another size than the video, or an option is out of range.
+    """
+    with VideoReader(video_path) as video:
+        background = _background_frames(background_paths, video.size) if background_paths else None
+        return silhouettes_by_background_subtraction(video, background, **options)
+
+
+def _background_frames(paths: Sequence[PathLike], size: tuple[int, int]) -> Iterator[np.ndarray]:
+    """Frames of background images and videos, each checked against the video size (w, h)."""
+    for path in map(Path, paths):
+        if path.suffix.lower() in IMAGE_SUFFIXES:
+            frames: Iterator[np.ndarray] = iter([read_image(path, cv2.IMREAD_COLOR, "background")])
+        else:
+            frames = read_frames(path, None)
+        for frame in frames:
+            found = (frame.shape[1], frame.shape[0])
+            if found != size:
+                raise InputError(
+                    f"background file '{path}': expected the video's size (w, h) = {size}, found (w, h) = {found}"
+                )
+            yield frame

@@ -12,32 +12,33 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, cast
+from typing import cast
 
 import cv2
 import numpy as np
 from tqdm import tqdm
 
+from ibik_pin.app.input_reports import SilhouetteQuality, TriangulationReport
+from ibik_pin.app.job import SEGMENTERS, TrackJob
+from ibik_pin.app.options import as_options
+from ibik_pin.app.silhouette_files import camera_folder_entries, check_video_size
 from ibik_pin.exceptions import IbikWarning, InputError
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, write_calibration
 from ibik_pin.io.trc import TrcData, write_trc
-from ibik_pin.io.video import VideoReader
+from ibik_pin.io.video import VideoReader, read_frames
+from ibik_pin.tracking.stack import Stack
 from ibik_pin.vision.extrinsics_refit import ExtrinsicsRefit, in_calibration_world, refit_extrinsics
-from ibik_pin.vision.learned_pose import MEDIAPIPE_INSTALL, VideoPose, detect_pose_in_video, learned_pose_available
+from ibik_pin.vision.learned_pose import MEDIAPIPE_INSTALL, VideoPose, detect_pose_in_frames, learned_pose_available
 from ibik_pin.vision.mask_store import CroppedMasks
 from ibik_pin.vision.triangulation import labelled_landmarks, triangulate_landmarks
 
-if TYPE_CHECKING:
-    from ibik_pin.tracking.pipeline import TrackJob
-
-__all__ = ["LIMB_KEYPOINTS", "REFITTED_CALIBRATION", "SEGMENTERS", "TRIANGULATED_TRC", "SilhouetteQuality",
-           "SilhouetteQualityReader", "TriangulationReport", "VideoSources", "detect_videos", "keep_subject",
+__all__ = ["LIMB_KEYPOINTS", "REFITTED_CALIBRATION", "TRIANGULATED_TRC", "SilhouetteQualityReader", "VideoSources",
+           "detect_videos", "keep_subject",
            "points_inside", "read_videos", "refitted_cameras", "resolve_segmenter", "restrict_to_subject",
            "triangulated_trc"]
 
-SEGMENTERS = ("auto", "mediapipe", "mog2")
 # How far outside a mask a projected target may fall and still claim the part it touches [m]:
 # a keypoint sits inside its limb, so a few centimetres of calibration and detection error.
 SUBJECT_MARGIN_M = 0.05
@@ -56,32 +57,33 @@ class VideoSources:
     """What `ibik track` read from --videos before tracking.
 
     Attributes:
-        job: the job, with `targets` the triangulated TRC when the videos gave them.
         cameras: the cameras to track with: as calibrated, or with re-fitted poses (extrinsics).
         poses: MediaPipe's detections per camera, or None (MOG2, masks, no videos).
         segmenter: "mediapipe", "mog2", "masks" (given by --masks) or "none".
         triangulation: how the targets were triangulated, or None when they were given.
         left_to_image: target keypoints not tracked (the limbs of a triangulated TRC).
         extrinsics: what the re-fit of the cameras' poses found, or None when it did not run.
+        targets: the TRC triangulated from the videos (in the staging folder, Y up), or None when
+            the job gives the targets.
+        stack: the stack to track the triangulated targets with (--triangulated-limbs), or None:
+            the job's own.
     """
 
-    job: TrackJob
     cameras: list
     poses: list[VideoPose] | None = None
     segmenter: str = "none"
     triangulation: TriangulationReport | None = None
     left_to_image: tuple[str, ...] = ()
     extrinsics: ExtrinsicsRefit | None = None
+    targets: Path | None = None
+    stack: Stack | None = None
 
 
 def read_videos(staging: Path, job: TrackJob, cameras: Sequence) -> VideoSources:
     """Run the videos' segmenter once; with MediaPipe's landmarks and three cameras or more, measure
     each camera's disagreement with the others and turn those of --refit-cameras (written to
     staging/REFITTED_CALIBRATION); without --targets, triangulate the targets into
-    staging/TRIANGULATED_TRC and return the job that tracks them."""
-    from ibik_pin.tracking.silhouette_files import camera_folder_entries
-    from ibik_pin.tracking.stack import Stack
-
+    staging/TRIANGULATED_TRC (VideoSources.targets)."""
     cameras = list(cameras)
     if job.refit_cameras is not None and (job.videos is None or len(cameras) < 3 or job.segmenter == "mog2"
                                           or not learned_pose_available()):
@@ -92,14 +94,14 @@ def read_videos(staging: Path, job: TrackJob, cameras: Sequence) -> VideoSources
         raise InputError(f"--refit-cameras: {', '.join(unknown)} not among the cameras "
                          f"{', '.join(camera.name for camera in cameras)}")
     if job.masks is not None:
-        return VideoSources(job, cameras, segmenter="masks")
+        return VideoSources(cameras, segmenter="masks")
     keypoints_needed = job.targets is None
     wanted = keypoints_needed or job.settings.use_image or job.overlay or job.refit_cameras
     if job.videos is None or not cameras or not wanted:
-        return VideoSources(job, cameras)
+        return VideoSources(cameras)
     segmenter = resolve_segmenter(job.segmenter, keypoints_needed)
     if segmenter == "mog2":
-        return VideoSources(job, cameras, segmenter=segmenter)
+        return VideoSources(cameras, segmenter=segmenter)
     if job.background is not None:
         warnings.warn("--background is used by --segmenter mog2 only; MediaPipe's silhouettes need none",
                       IbikWarning, stacklevel=2)
@@ -118,16 +120,15 @@ def read_videos(staging: Path, job: TrackJob, cameras: Sequence) -> VideoSources
             write_calibration(staging / REFITTED_CALIBRATION, in_calibration_world(cameras, POSE2SIM_TRC_TO_WORLD))
             triangulated = None
     if not keypoints_needed:
-        return VideoSources(job, cameras, poses, segmenter, extrinsics=extrinsics)
+        return VideoSources(cameras, poses, segmenter, extrinsics=extrinsics)
     trc, figures = triangulated_trc(cameras, poses, video_frame_rate(entries[cameras[0].name]), triangulated)
     write_trc(staging / TRIANGULATED_TRC, trc)
     left_out = () if job.triangulated_limbs else LIMB_KEYPOINTS
     report = TriangulationReport(file=TRIANGULATED_TRC, keypoints=list(trc.marker_names),
                                  tracked_keypoints=[name for name in trc.marker_names if name not in left_out],
                                  **figures)
-    settings = replace(job.settings, stack=Stack.packaged(LIMB_STACK_FILE)) if job.triangulated_limbs else job.settings
-    job = replace(job, targets=staging / TRIANGULATED_TRC, trc_axes="y-up", settings=settings, triangulated_limbs=False)
-    return VideoSources(job, cameras, poses, segmenter, report, left_out, extrinsics)
+    stack = Stack.packaged(LIMB_STACK_FILE) if job.triangulated_limbs else None
+    return VideoSources(cameras, poses, segmenter, report, left_out, extrinsics, staging / TRIANGULATED_TRC, stack)
 
 
 def _triangulate(cameras: Sequence, poses: Sequence[VideoPose]) -> tuple[dict, dict]:
@@ -147,8 +148,9 @@ def refitted_cameras(cameras: Sequence, poses: Sequence[VideoPose], refit: Seque
     if swapped is None:
         swapped = _triangulate(cameras, poses)[1]["views_swapped"]
     confidence = labelled_landmarks(visibility[..., None], swapped)[..., 0]
-    return refit_extrinsics(cameras, labelled_landmarks(landmarks, swapped),
-                            np.where(confidence >= REFIT_MIN_VISIBILITY, confidence, 0.0), refit)
+    with as_options({"refit": "--refit-cameras"}):
+        return refit_extrinsics(cameras, labelled_landmarks(landmarks, swapped),
+                                np.where(confidence >= REFIT_MIN_VISIBILITY, confidence, 0.0), refit)
 
 
 def restrict_to_subject(video_masks: Sequence[CroppedMasks], cameras: Sequence, targets_m: np.ndarray) -> None:
@@ -186,8 +188,6 @@ def resolve_segmenter(requested: str, keypoints_needed: bool) -> str:
 
 def detect_videos(videos: dict[str, Path], cameras: Sequence, progress: bool) -> list[VideoPose]:
     """MediaPipe Pose on every camera's video, masks fitted to the calibrated size."""
-    from ibik_pin.tracking.silhouette_files import check_video_size
-
     sizes = {camera.name: check_video_size(videos[camera.name], camera) for camera in cameras}
     frames = 0
     for camera in cameras:
@@ -198,7 +198,7 @@ def detect_videos(videos: dict[str, Path], cameras: Sequence, progress: bool) ->
     with tqdm(total=frames or None, desc="pose and silhouettes", unit="frame",
               disable=None if progress else True) as bar:
         for camera in cameras:
-            pose = detect_pose_in_video(videos[camera.name], progress=bar.update)
+            pose = detect_pose_in_frames(read_frames(videos[camera.name]), progress=bar.update)
             if sizes[camera.name] != tuple(camera.size):
                 pose.masks = pose.masks.fitted(tuple(camera.size))
             poses.append(pose)
@@ -207,28 +207,6 @@ def detect_videos(videos: dict[str, Path], cameras: Sequence, progress: bool) ->
         raise InputError(f"--videos: the cameras' videos have different frame counts {counts}; "
                          "they must be synchronised and of equal length")
     return poses
-
-
-@dataclass
-class TriangulationReport:
-    """How the targets were triangulated from the videos (report.json's "triangulation").
-
-    Attributes:
-        file: the triangulated TRC written with the outputs.
-        keypoints: its keypoint names; tracked_keypoints: those used as targets.
-        frames_swapped_per_view: per camera, the frames whose left and right the detector had
-            exchanged (resolved across views).
-        landmarks_used_per_view: per camera, the share of landmarks it contributed [0-1].
-        reprojection_median_m: median over frames of the median reprojection error, at the
-            point's depth [m].
-    """
-
-    file: str
-    keypoints: list[str]
-    tracked_keypoints: list[str]
-    frames_swapped_per_view: dict[str, int]
-    landmarks_used_per_view: dict[str, float]
-    reprojection_median_m: float | None
 
 
 def triangulated_trc(cameras: Sequence, poses: Sequence[VideoPose], frame_rate: float,
@@ -285,24 +263,6 @@ def keep_subject(mask: np.ndarray, pixels: np.ndarray, radius_px: np.ndarray) ->
             keep[np.unique(labels[v0:v1, u0:u1])] = True
     keep[0] = False
     return keep[labels]
-
-
-@dataclass
-class SilhouetteQuality:
-    """How well each camera's silhouettes hold the subject (report.json's "silhouettes").
-
-    Attributes:
-        segmenter: "mediapipe", "mog2" or "masks" (given).
-        targets_inside_per_view: per camera, per frame, the share of the projected targets inside
-            the silhouette [0-1] (None in a frame without targets).
-        targets_inside_mean: per camera, its mean over frames.
-        mask_area_per_view: per camera, per frame, the silhouette's area [px].
-    """
-
-    segmenter: str
-    targets_inside_per_view: dict[str, list[float | None]] = field(default_factory=dict)
-    targets_inside_mean: dict[str, float | None] = field(default_factory=dict)
-    mask_area_per_view: dict[str, list[int]] = field(default_factory=dict)
 
 
 def points_inside(camera, mask: np.ndarray, points: np.ndarray) -> np.ndarray:

@@ -62,7 +62,7 @@ class FrameSlots:
         return arrays
 
 
-def pack_frame(images: FrameImages) -> tuple[tuple, list[np.ndarray]]:
+def pack_frame(images) -> tuple[tuple, list[np.ndarray]]:
     """FrameImages as (a picklable description, its arrays)."""
     arrays: list[np.ndarray] = []
 

@@ -79,7 +79,7 @@ def can_fork() -> bool:
 
 @runtime_checkable
 class FrameRecords(Protocol):
-    """A silhouette source that keeps per-frame figures (tracking.video_inputs.SilhouetteQualityReader):
+    """A silhouette source that keeps per-frame figures (app.video_inputs.SilhouetteQualityReader):
     the child process reads the frames, so their figures are sent back to the parent's source."""
 
     def recorded_frames(self) -> int:

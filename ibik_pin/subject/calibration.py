@@ -103,7 +103,6 @@ __all__ = [
     "calibrate_static_trial",
     "calibrate_subject",
     "check_subject_size",
-    "parse_frame_range",
     "select_frames",
 ]
 
@@ -305,24 +304,6 @@ def _pelvis_as_spine(start: BodyModel, original: BodyModel) -> BodyModel:
             before.jointPlacements[before.getJointId(hip)].translation)
         model.jointPlacements[index] = pin.SE3(model.jointPlacements[index].rotation, translation)
     return start
-
-
-def parse_frame_range(text: str) -> tuple[int | None, int | None]:
-    """``FIRST:LAST`` (TRC frame numbers, both included; either may be left out) as a pair.
-
-    Raises:
-        InputError: not of that form, or FIRST after LAST.
-    """
-    first, colon, last = text.partition(":")
-    try:
-        bounds = (int(first) if first.strip() else None, int(last) if last.strip() else None)
-    except ValueError:
-        bounds = None
-    if not colon or bounds is None:
-        raise InputError(f"--frames: expected FIRST:LAST (TRC frame numbers, e.g. 1:30), got {text!r}")
-    if bounds[0] is not None and bounds[1] is not None and bounds[0] > bounds[1]:
-        raise InputError(f"--frames: FIRST must not be after LAST, got {text!r}")
-    return bounds
 
 
 def calibrate_static_trial(

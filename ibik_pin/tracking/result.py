@@ -1,7 +1,7 @@
 """What tracking a sequence gives: every frame's pose, keypoints, residuals, image overlap and levels.
 
-`Tracker.track` (:mod:`ibik_pin.tracking.tracker`) fills it; :mod:`ibik_pin.tracking.report` turns it
-into report.json, :mod:`ibik_pin.tracking.pipeline` into the output files.
+`Tracker.track` (:mod:`ibik_pin.tracking.tracker`) fills it; :mod:`ibik_pin.app.report` turns it
+into report.json, :mod:`ibik_pin.app.outputs` into the output files.
 """
 
 from __future__ import annotations

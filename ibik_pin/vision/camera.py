@@ -263,15 +263,15 @@ def select_cameras(cameras: Sequence[Camera], names: Sequence[str]) -> list[Came
     """
     by_name = {camera.name: camera for camera in cameras}
     if isinstance(names, str):
-        raise InputError(f"names: expected a list of camera names, found the string {names!r}")
+        raise InputError(f"names: expected a list of camera names, found the string {names!r}", parameter="names")
     unknown = [name for name in names if name not in by_name]
     if unknown:
-        raise UnknownNameError(
-            f"--cameras: unknown camera name(s) {unknown}; the calibration has {list(by_name)}"
-        )
+        raise UnknownNameError(f"names: unknown camera name(s) {unknown}; the calibration has {list(by_name)}",
+                               parameter="names")
     repeated = sorted({name for name in names if list(names).count(name) > 1})
     if repeated:
-        raise InputError(f"--cameras: expected each camera at most once, found {repeated} more than once")
+        raise InputError(f"names: expected each camera at most once, found {repeated} more than once",
+                         parameter="names")
     return [by_name[name] for name in names]
 
 

@@ -130,19 +130,20 @@ def refit_extrinsics(cameras: Sequence[PinholeCamera], landmarks: np.ndarray, we
         raise InputError(f"the cameras' extrinsics are checked against each other from three cameras, found {names}")
     unknown = [name for name in refit if name not in names]
     if unknown:
-        raise InputError(f"--refit-cameras: {', '.join(unknown)} not among the cameras {', '.join(names)}")
+        raise InputError(f"refit: {', '.join(unknown)} not among the cameras {', '.join(names)}", parameter="refit")
     matches = _all_matches(cameras, landmarks, weights)
     result = ExtrinsicsRefit(reprojection_px=_errors(cameras, matches))
     for name in refit:
         view = names.index(name)
         if len(matches[view][0]) < MIN_MATCHES:
-            raise InputError(f"--refit-cameras {name}: {len(matches[view][0])} detections seen by the other views "
-                             f"as well, {MIN_MATCHES} needed")
+            raise InputError(f"refit {name}: {len(matches[view][0])} detections seen by the other views as well, "
+                             f"{MIN_MATCHES} needed", parameter="refit")
         fitted = _fit_rotation(cameras[view], *matches[view])
         turn = float(np.degrees(np.linalg.norm(cv2.Rodrigues(fitted.rotation @ cameras[view].rotation.T)[0])))
         if turn > MAX_TURN_DEG:
-            raise InputError(f"--refit-cameras {name}: its detections turn it {turn:.1f} deg from its calibration, "
-                             f"more than a slip ({MAX_TURN_DEG:g} deg): the calibration is wrong, calibrate again")
+            raise InputError(f"refit {name}: its detections turn it {turn:.1f} deg from its calibration, more than a "
+                             f"slip ({MAX_TURN_DEG:g} deg): the calibration is wrong, calibrate again",
+                             parameter="refit")
         cameras[view] = fitted
         result.refitted.append(name)
         result.turn_deg[name] = turn

@@ -12,21 +12,18 @@ with numpy 2; tests/test_learned_pose.py runs it wherever it is installed).
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from importlib import util
-from pathlib import Path
 
 import cv2
 import numpy as np
 
-from ibik_pin.exceptions import FileFormatError, InputError
-from ibik_pin.io.files import PathLike
+from ibik_pin.exceptions import InputError
 from ibik_pin.io.native_output import captured_native_stderr
-from ibik_pin.io.video import read_frames
 from ibik_pin.vision.mask_store import CroppedMasks
 
-__all__ = ["LANDMARKS", "MEDIAPIPE_INSTALL", "VideoPose", "detect_pose_in_video", "learned_pose_available"]
+__all__ = ["LANDMARKS", "MEDIAPIPE_INSTALL", "VideoPose", "detect_pose_in_frames", "learned_pose_available"]
 
 MEDIAPIPE_INSTALL = "pip install 'ibik_pin[video]' && pip install --no-deps mediapipe==0.10.21"
 
@@ -78,29 +75,27 @@ def _solution(model_complexity: int):
                                       min_detection_confidence=0.5, min_tracking_confidence=0.5)
 
 
-def detect_pose_in_video(path: PathLike, *, max_frames: int | None = None, mask_threshold: float = 0.5,
-                         model_complexity: int = 1, progress: Callable[[int], object] | None = None) -> VideoPose:
+def detect_pose_in_frames(frames: Iterable[np.ndarray], *, mask_threshold: float = 0.5, model_complexity: int = 1,
+                          progress: Callable[[int], object] | None = None) -> VideoPose:
     """MediaPipe Pose's landmarks and person segmentation in every frame of a video.
 
     Args:
-        path: the video.
-        max_frames: only the first frames, or None for all.
+        frames: the video's frames in order, (H, W, 3) BGR uint8 (io.video.read_frames).
         mask_threshold: segmentation probability above which a pixel is the person.
         model_complexity: 1 (BlazePose full, the default) is the model the 0.10.21 wheel ships;
             0 and 2 are downloaded on first use.
         progress: called with 1 after each frame (a progress bar's update).
 
     Raises:
-        InputError: MediaPipe is not installed (the message gives the install command), or
-            `mask_threshold` is outside (0, 1).
-        FileFormatError: the video cannot be read or has no frame.
+        InputError: MediaPipe is not installed (the message gives the install command),
+            `mask_threshold` is outside (0, 1), or `frames` holds none.
     """
     if not 0.0 < mask_threshold < 1.0:
         raise InputError(f"mask_threshold: expected a probability in (0, 1), found {mask_threshold!r}")
     keypoints, visibility = [], []
     masks: CroppedMasks | None = None
     with _solution(model_complexity) as pose, captured_native_stderr():
-        for frame in read_frames(path, max_frames):
+        for frame in frames:
             height, width = frame.shape[:2]
             masks = masks if masks is not None else CroppedMasks((width, height))
             found = pose.process(cv2.cvtColor(frame, cv2.COLOR_BGR2RGB))
@@ -117,5 +112,5 @@ def detect_pose_in_video(path: PathLike, *, max_frames: int | None = None, mask_
             if progress is not None:
                 progress(1)
     if masks is None:
-        raise FileFormatError(f"video file '{Path(path)}': expected frames, found none")
+        raise InputError("frames: expected at least one frame, found none")
     return VideoPose(np.array(keypoints), np.array(visibility), masks)

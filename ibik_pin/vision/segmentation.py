@@ -1,27 +1,40 @@
 """Silhouettes from images: background subtraction of videos, and temporal voting of masks.
 
-:func:`silhouettes_from_video` segments the moving person of a still camera's video with OpenCV's
-MOG2 background model, learnt on frames of the empty scene or, without them, on the video's own
-median plate; :class:`TemporalMajority` votes each pixel of a mask sequence over neighbouring
-frames to remove segmentation flicker.
+:func:`silhouettes_by_background_subtraction` segments the moving person of a still camera's video
+(its decoded frames; the files are opened by the caller) with OpenCV's MOG2 background model, learnt
+on frames of the empty scene or, without them, on the video's own median plate;
+:class:`TemporalMajority` votes each pixel of a mask sequence over neighbouring frames to remove
+segmentation flicker.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator, Sequence
-from pathlib import Path
+import itertools
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from typing import Protocol
 
 import cv2
 import numpy as np
 
 from ibik_pin.checks import as_mask
-from ibik_pin.exceptions import FileFormatError, InputError
-from ibik_pin.io.files import PathLike
-from ibik_pin.io.masks import IMAGE_SUFFIXES, read_image
-from ibik_pin.io.video import VideoReader, read_frames
+from ibik_pin.exceptions import InputError
 from ibik_pin.vision.mask_store import CroppedMasks
 
-__all__ = ["TemporalMajority", "silhouettes_from_video"]
+__all__ = ["TemporalMajority", "VideoFrames", "silhouettes_by_background_subtraction"]
+
+
+class VideoFrames(Protocol):
+    """A video's frames, read again from the first one by each iteration (an io.video.VideoReader).
+
+    Attributes:
+        size: (width, height) [px].
+        frame_count: the number of frames announced (0 or less: unknown).
+    """
+
+    size: tuple[int, int]
+    frame_count: int
+
+    def __iter__(self) -> Iterator[np.ndarray]: ...
 
 
 class TemporalMajority:
@@ -64,22 +77,6 @@ class TemporalMajority:
                 for camera in range(len(window[0]))]
 
 
-def _background_frames(paths: Sequence[PathLike], size: tuple[int, int]) -> Iterator[np.ndarray]:
-    """Frames of background images and videos, each checked against the video size (w, h)."""
-    for path in map(Path, paths):
-        if path.suffix.lower() in IMAGE_SUFFIXES:
-            frames: Iterator[np.ndarray] = iter([read_image(path, cv2.IMREAD_COLOR, "background")])
-        else:
-            frames = read_frames(path, None)
-        for frame in frames:
-            found = (frame.shape[1], frame.shape[0])
-            if found != size:
-                raise InputError(
-                    f"background file '{path}': expected the video's size (w, h) = {size}, found (w, h) = {found}"
-                )
-            yield frame
-
-
 def _keep_largest_components(mask: np.ndarray, max_components: int, min_component_fraction: float) -> np.ndarray:
     count, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
     if count <= 1:
@@ -92,9 +89,9 @@ def _keep_largest_components(mask: np.ndarray, max_components: int, min_componen
     return keep[labels]
 
 
-def silhouettes_from_video(
-    video_path: PathLike,
-    background_paths: Sequence[PathLike] | None = None,
+def silhouettes_by_background_subtraction(
+    video: VideoFrames,
+    background: Iterable[np.ndarray] | None = None,
     *,
     max_frames: int | None = None,
     var_threshold: float = 16.0,
@@ -107,7 +104,7 @@ def silhouettes_from_video(
 ) -> CroppedMasks:
     """Silhouettes of the moving person in a video, by OpenCV background subtraction (MOG2).
 
-    With ``background_paths`` (images or videos of the empty scene, same size as the video),
+    With ``background`` (frames of the empty scene, the video's size),
     MOG2 learns the background on them, then is frozen while the video is segmented. Without,
     it learns on the video itself: the per-pixel temporal median of ``median_frames`` evenly
     spaced frames gives a background plate; MOG2 learns on these frames with the pixels far
@@ -126,8 +123,8 @@ def silhouettes_from_video(
     the median sample (``median_frames`` frames) is held in memory.
 
     Args:
-        video_path: the video.
-        background_paths: images or videos of the empty scene, or None.
+        video: the video's frames, (H, W, 3) BGR uint8, read twice.
+        background: (H, W, 3) BGR uint8 frames of the empty scene, or None.
         max_frames: segment only the first frames, or None for all.
         var_threshold: MOG2's squared Mahalanobis distance threshold.
         median_frames: number of frames in the median background plate (no background given).
@@ -142,10 +139,9 @@ def silhouettes_from_video(
         One (H, W) bool mask per frame, True = person (kept as bounding-box crops).
 
     Raises:
-        FileFormatError: the video or a background file cannot be read.
-        InputError: a background has another size than the video, or a parameter is out of range.
+        InputError: the video has no frame, a background frame has another size than the video, or
+            a parameter is out of range.
     """
-    video_path = Path(video_path)
     for name, value, smallest in (
         ("open_px", open_px, 0),
         ("close_px", close_px, 0),
@@ -162,25 +158,28 @@ def silhouettes_from_video(
     if not var_threshold > 0.0:
         raise InputError(f"var_threshold: expected a positive number, found {var_threshold!r}")
 
-    with VideoReader(video_path) as reader:
-        size, frame_total = reader.size, reader.frame_count
+    size, frame_total = (int(video.size[0]), int(video.size[1])), video.frame_count
     if max_frames is not None:
         frame_total = min(frame_total, max_frames) if frame_total > 0 else max_frames
     subtractor = cv2.createBackgroundSubtractorMOG2(varThreshold=float(var_threshold), detectShadows=True)
-    if background_paths:
-        for frame in _background_frames(background_paths, size):
+    if background is not None:
+        for index, frame in enumerate(background):
+            found = (frame.shape[1], frame.shape[0])
+            if found != size:
+                raise InputError(f"background frame {index}: expected the video's size (w, h) = {size}, "
+                                 f"found (w, h) = {found}")
             subtractor.apply(frame, learningRate=-1)
     else:
         # Without an announced frame count, the plate is the median of the first frames.
         stride = max(1, -(-frame_total // median_frames)) if frame_total > 0 else 1
         sample = []
-        for index, frame in enumerate(read_frames(video_path, max_frames)):
+        for index, frame in enumerate(itertools.islice(video, max_frames)):
             if index % stride == 0:
                 sample.append(frame)
                 if len(sample) == median_frames:
                     break
         if not sample:
-            raise FileFormatError(f"video file '{video_path}': expected frames, found none")
+            raise InputError("video: expected frames, found none")
         plate = np.median(np.stack(sample), axis=0).astype(np.uint8)
         for frame in sample:
             channels = cv2.split(cv2.absdiff(frame, plate))
@@ -191,7 +190,7 @@ def silhouettes_from_video(
     open_kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (open_px, open_px)) if open_px > 0 else None
     close_kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (close_px, close_px)) if close_px > 0 else None
     masks = CroppedMasks(size)
-    for frame in read_frames(video_path, max_frames):
+    for frame in itertools.islice(video, max_frames):
         mask = (subtractor.apply(frame, learningRate=0.0) == 255).astype(np.uint8)  # 127 = shadow
         if open_kernel is not None:
             mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, open_kernel)
@@ -199,5 +198,5 @@ def silhouettes_from_video(
             mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, close_kernel)
         masks.append(_keep_largest_components(mask, int(max_components), float(min_component_fraction)))
     if not len(masks):
-        raise FileFormatError(f"video file '{video_path}': expected frames, found none")
+        raise InputError("video: expected frames, found none")
     return masks

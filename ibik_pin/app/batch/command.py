@@ -16,8 +16,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from ibik_pin.batch.summary import TrialOutcome
-    from ibik_pin.tracking.pipeline import TrackJob
+    from ibik_pin.app.batch.summary import TrialOutcome
+    from ibik_pin.app.job import TrackJob
 
 __all__ = ["add_batch_arguments", "run_batch_command"]
 
@@ -62,15 +62,15 @@ def run_batch_command(arguments: argparse.Namespace, make_job: Callable[[argpars
     Raises:
         IbikError: Dask missing, bad options, no trial found, an unreachable scheduler.
     """
-    from ibik_pin.batch.runner import require_dask
+    from ibik_pin.app.batch.runner import require_dask
 
     require_dask()
     from tqdm import tqdm
 
-    from ibik_pin.batch.discovery import find_trials
-    from ibik_pin.batch.runner import SubjectTask, TrialTask, dask_client, run_on_dask
-    from ibik_pin.batch.summary import TrialOutcome, write_summary
-    from ibik_pin.batch.tasks import completed_outcome
+    from ibik_pin.app.batch.discovery import find_trials
+    from ibik_pin.app.batch.runner import SubjectTask, TrialTask, dask_client, run_on_dask
+    from ibik_pin.app.batch.summary import TrialOutcome, write_summary
+    from ibik_pin.app.batch.tasks import completed_outcome
     from ibik_pin.exceptions import InputError
 
     if arguments.workers is not None and (arguments.scheduler is not None or arguments.workers < 1):

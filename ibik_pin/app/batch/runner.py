@@ -17,10 +17,10 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
-from ibik_pin.batch.summary import TrialOutcome
-from ibik_pin.batch.tasks import SubjectOutcome, calibrate_subject_once, one_line, run_trial
+from ibik_pin.app.batch.summary import TrialOutcome
+from ibik_pin.app.batch.tasks import SubjectOutcome, calibrate_subject_once, one_line, run_trial
+from ibik_pin.app.job import TrackJob
 from ibik_pin.exceptions import IbikError
-from ibik_pin.tracking.pipeline import TrackJob
 
 __all__ = ["INSTALL_HINT", "SubjectTask", "TrialTask", "dask_client", "require_dask", "run_on_dask"]
 

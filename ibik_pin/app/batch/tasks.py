@@ -13,14 +13,19 @@ import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from ibik_pin.batch.summary import TrialOutcome, outcome_from_report
+from ibik_pin.app.batch.summary import TrialOutcome, outcome_from_report
+from ibik_pin.app.job import TrackJob
+from ibik_pin.app.track import run_track
+from ibik_pin.exceptions import IbikError
+from ibik_pin.human import load_human
+from ibik_pin.subject.calibration import calibrate_static_trial
 from ibik_pin.subject.calibration_result import write_calibration_figures
-from ibik_pin.tracking.pipeline import TrackJob, run_track
+from ibik_pin.subject.urdf import write_subject_urdf
 
 __all__ = ["OUTPUT_FILES", "SubjectOutcome", "calibrate_subject_once", "completed_outcome", "one_line", "run_trial",
            "worker_name"]
 
-# What run_track writes into OUTDIR (tracking.pipeline.write_outputs); with --overlay, also these
+# What run_track writes into OUTDIR (app.outputs.write_outputs); with --overlay, also these
 # and one overlay video per camera.
 OUTPUT_FILES = ("joints.trc", "q.csv", "motion.mot", "motion.bvh", "report.json")
 OVERLAY_FILES = ("residuals.png", "replay.html")
@@ -36,8 +41,6 @@ class SubjectOutcome:
 
 def one_line(error: BaseException) -> str:
     """The error as one line; its type is named unless it is one of the package's own."""
-    from ibik_pin.exceptions import IbikError
-
     message = " ".join(str(error).split())
     return message if isinstance(error, IbikError) else f"{type(error).__name__}: {message}"
 
@@ -60,10 +63,6 @@ def calibrate_subject_once(static: Path, model: Path | None, urdf: Path) -> Subj
     """
     if urdf.is_file():
         return SubjectOutcome(urdf)
-    from ibik_pin.human import load_human
-    from ibik_pin.subject.calibration import calibrate_static_trial
-    from ibik_pin.subject.urdf import write_subject_urdf
-
     try:
         body = load_human(model) if model is not None else load_human()
         with warnings.catch_warnings():

@@ -1,0 +1,97 @@
+"""The job of `ibik track`: what it was asked to do, as a plain record the application reads.
+
+The job is checked when made (what the CLI refuses, the API refuses too) and never rewritten:
+what the application computes from it (targets triangulated from the videos, the stack as solved)
+is returned by the functions that compute it.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ibik_pin.app.axes import TRC_AXES
+from ibik_pin.exceptions import InputError
+from ibik_pin.tracking.settings import TrackingSettings
+
+# Where the silhouettes of --videos come from (app.video_inputs.resolve_segmenter).
+SEGMENTERS = ("auto", "mediapipe", "mog2")
+# Bounds that keep a run finite: at 1000 steps a frame already takes seconds, and a majority vote
+# over more than 61 frames (a second at 60 Hz) is no longer a filter of flicker.
+MAX_ITERATIONS = 1000
+MAX_MASK_FILTER_RADIUS = 30
+
+
+def check_run_bounds(settings: TrackingSettings) -> None:
+    """Refuse step counts and a mask filter outside the bounds above (InputError naming the option)."""
+    for option, value, low, high in (("--iterations", settings.iterations, 1, MAX_ITERATIONS),
+                                     ("--mask-filter", settings.mask_filter_radius, 0, MAX_MASK_FILTER_RADIUS)):
+        if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+            raise InputError(f"{option}: expected a whole number from {low} to {high}, found {value!r}")
+    tolerance = settings.step_tolerance
+    if tolerance is not None and not (isinstance(tolerance, (int, float)) and np.isfinite(tolerance) and tolerance > 0):
+        raise InputError(f"--step-tolerance: expected a positive number of radians, found {tolerance!r}")
+
+
+@dataclass(frozen=True)
+class TrackJob:
+    """Everything `ibik track` was asked to do (paths as given on the command line): a record that
+    the modules of the application read and never rewrite.
+
+    `trc_axes` is the TRC files' axis convention: "auto" (detected against the calibration's
+    cameras; y-up without a calibration), "y-up" (Pose2Sim, OpenSim) or "z-up" (the calibration's
+    own world); see app.axes.
+    """
+
+    targets: Path | None
+    out: Path
+    static: Path | None = None
+    calibration: Path | None = None
+    masks: Path | None = None
+    videos: Path | None = None
+    background: Path | None = None
+    cameras: list[str] | None = None
+    model: Path | None = None
+    settings: TrackingSettings = field(default_factory=TrackingSettings)
+    overlay: bool = False
+    quiet: bool = False
+    trc_axes: str = "auto"
+    segmenter: str = "auto"
+    triangulated_limbs: bool = False
+    refit_cameras: list[str] | None = None
+
+    def __post_init__(self) -> None:
+        """Paths given as str become Paths; what the CLI refuses, the API refuses too (InputError)."""
+        for name in ("targets", "out", "static", "calibration", "masks", "videos", "background", "model"):
+            value = getattr(self, name)
+            if value is not None and not isinstance(value, Path):
+                if isinstance(value, str) and not value.strip():
+                    raise InputError(f"--{name} {value!r}: expected a path, found an empty name")
+                if not isinstance(value, (str, os.PathLike)):
+                    raise InputError(f"TrackJob.{name}: expected a path (str or Path), found {type(value).__name__}")
+                object.__setattr__(self, name, Path(value))  # frozen: converted once, here
+        if self.masks is not None and self.videos is not None:
+            raise InputError("--masks and --videos: give one source of silhouettes, not both")
+        if self.background is not None and self.videos is None:
+            raise InputError("--background goes with --videos")
+        if self.targets is None and (self.videos is None or self.calibration is None):
+            raise InputError("--targets: needed unless --videos and --calibration are given (then the end "
+                             "effectors are triangulated from the videos)")
+        if self.triangulated_limbs and self.targets is not None:
+            raise InputError("--triangulated-limbs goes with --videos without --targets")
+        if self.triangulated_limbs and self.settings.stack is not None:
+            raise InputError("--triangulated-limbs and --stack: give the elbows and knees a level in your "
+                             "stack instead")
+        if self.segmenter not in SEGMENTERS:
+            raise InputError(f"--segmenter: expected one of {', '.join(SEGMENTERS)}, found {self.segmenter!r}")
+        if self.trc_axes not in ("auto", *TRC_AXES):
+            raise InputError(f"--trc-axes: expected auto, {', '.join(TRC_AXES)}, found {self.trc_axes!r}")
+        check_run_bounds(self.settings)
+
+    @property
+    def inputs(self) -> list[Path | None]:
+        """Every input path of the job (None for those not given)."""
+        return [self.targets, self.static, self.calibration, self.masks, self.videos, self.background, self.model]
