@@ -57,8 +57,12 @@ def _strided_translations(placements: list) -> np.ndarray | None:
     None.
 
     Each placement's `translation` is a view into data.oMf, which keeps its SE3s at equal
-    distances in memory: one strided view then reads all frames at once (a frame by frame read of
-    21 frames costs 8 us a step). Used only where the addresses show that layout.
+    distances in memory: one strided view then reads all frames at once. Measured on the human's 21
+    keypoint frames: 5 us a read through the view against 113 us through Pinocchio's API
+    (`data.oMf[frame].translation`, frame by frame), a quarter of a whole-body step's median. This
+    depends on Pinocchio's layout, so the view is built only where the addresses show it, and
+    tests/test_configuration.py fails the day Pinocchio's layout changes (no view, or a view that
+    reads other values than the API). The view lives as long as `data`, whose vector is never resized.
     """
     translations = [placement.translation for placement in placements]
     if not translations or any(t.dtype != np.float64 or t.shape != (3,) or t.strides != (8,) for t in translations):

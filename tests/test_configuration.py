@@ -155,3 +155,25 @@ def test_frame_reads_are_kept_read_only_until_the_next_update(human, rng):
     before = configuration.frame_positions(frames)
     configuration.update(random_human_configuration(human, rng))
     assert not np.allclose(configuration.frame_positions(frames), before)
+
+
+@pytest.mark.parametrize("model_name", ["human", "arm"])
+def test_the_fast_read_of_frame_translations_matches_pinocchios_api(human, rng, model_name):
+    """The strided view over data.oMf (Configuration's fast read, measured 20x faster than the API's
+    frame-by-frame read) relies on Pinocchio's memory layout: this fails the day that layout changes,
+    rather than the code falling back silently to the slow read."""
+    import gc
+
+    model = human.model if model_name == "human" else load_arm().model
+    configuration = Configuration(model)
+    view = configuration._translations
+    assert view is not None, "data.oMf no longer keeps its SE3s at equal distances in memory"
+    for _ in range(3):
+        q = (random_human_configuration(human, rng) if model_name == "human"
+             else rng.uniform(model.lowerPositionLimit, model.upperPositionLimit))
+        configuration.update(q)
+        gc.collect()
+        expected = np.array([configuration.data.oMf[frame].translation for frame in range(model.nframes)])
+        np.testing.assert_array_equal(view, expected)
+        ids = np.arange(model.nframes, dtype=np.int64)
+        np.testing.assert_array_equal(configuration.frame_positions(ids), expected)
