@@ -1,6 +1,6 @@
 """The package's layers, read from its source with `ast`: no import cycle (imports inside functions
-and under TYPE_CHECKING included), the library never imports the experiments, and the vision modules
-compute on arrays without opening files."""
+and under TYPE_CHECKING included), no layer importing one above it, the library never importing the
+experiments, and the vision modules computing on arrays without opening files."""
 
 from __future__ import annotations
 
@@ -107,6 +107,19 @@ def test_the_package_has_no_import_cycle():
     cycle = find_cycle(import_graph())
 
     assert cycle is None, "import cycle: " + " -> ".join(cycle or [])
+
+
+@pytest.mark.parametrize(("importers", "imported"), [
+    (("ibik_pin",), ("ibik_pin.app", "ibik_pin.cli")),  # the application and the CLI sit on top
+    (("ibik_pin.readahead",), ("ibik_pin.tracking",)),  # the read-ahead serves the tracker from below
+])
+def test_a_layer_never_imports_the_layers_above_it(importers, imported):
+    above = ("ibik_pin.app", "ibik_pin.cli")
+    offenders = sorted(f"{module} imports {target}" for module, targets in import_graph().items()
+                       if module.startswith(importers) and not module.startswith(above)
+                       for target in targets if target.startswith(imported))
+
+    assert offenders == []
 
 
 def test_the_library_never_imports_the_experiments():
