@@ -231,8 +231,8 @@ def priority_section() -> list[str]:
     for strategy in STRATEGIES:
         clean = figures[(strategy, "clean", 2)]
         rows.append([strategy,
-                     *(mm(figures[(strategy, *setting)]["elbows_boxing_mm"]) for setting in settings),
-                     *(mm(figures[(strategy, *setting)]["knees_walking_mm"]) for setting in settings),
+                     *(mm(figures[strategy, condition, views]["elbows_boxing_mm"]) for condition, views in settings),
+                     *(mm(figures[strategy, condition, views]["knees_walking_mm"]) for condition, views in settings),
                      mm(clean["upper_targets_mm"]), f"{clean['limit_hits_per_frame']:.2f}",
                      f"{clean['solve_fps'] / default_fps:.2f}"])
     header = ["strategy", *(f"elbows {c} {v}v" for c, v in settings), *(f"knees {c} {v}v" for c, v in settings),

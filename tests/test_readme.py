@@ -8,6 +8,7 @@ option, and checks choices), and every `--option` the README names in backquotes
 
 from __future__ import annotations
 
+import argparse
 import os
 import re
 import shlex
@@ -48,7 +49,7 @@ def ibik_command_lines() -> list[list[str]]:
 def option_names(subcommand: str) -> set[str]:
     """Every option string a subcommand's parser accepts."""
     parser = build_parser()
-    subparsers = next(action for action in parser._actions if action.choices and subcommand in action.choices)
+    subparsers = next(action for action in parser._actions if isinstance(action, argparse._SubParsersAction))
     return {option for action in subparsers.choices[subcommand]._actions for option in action.option_strings}
 
 
