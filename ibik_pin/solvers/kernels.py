@@ -14,7 +14,9 @@ Why compiled: the levels are small (at most 44 columns and 38 rows on the human)
 boxing each of their numpy and LAPACK calls cost microseconds of wrapper around a few hundred
 nanoseconds of arithmetic: the level loop was a third of the QP's step. Compiled on first use and
 cached on disk, as the image kernels (:mod:`ibik_pin.vision.kernels`); the loop with all it calls
-takes about 17 s to compile on a 2-core machine, once.
+takes about 17 s to compile on a 2-core machine, once. The Cholesky factors are LAPACK's (numpy's
+cholesky, which Numba compiles to potrf: a hand-written one measured no faster on the real step);
+the pivoted QR is a compiled copy of geqp3's (see `householder`).
 
 This module is long because Numba's on-disk cache checks only the file of the function it compiles:
 with the loop in one file and a function it calls in another, a change to the latter would leave
@@ -34,28 +36,22 @@ RANK_TOLERANCE = 1e-10
 
 @njit(cache=True, nogil=True)
 def cholesky(matrix):
-    """Lower Cholesky triangle L of a symmetric matrix, and whether it is positive definite."""
-    n = matrix.shape[0]
-    triangle = np.zeros((n, n))
-    for j in range(n):
-        pivot = matrix[j, j]
-        for k in range(j):
-            pivot -= triangle[j, k] * triangle[j, k]
-        if not pivot > 0.0:  # also NaN
-            return triangle, False
-        diagonal = np.sqrt(pivot)
-        triangle[j, j] = diagonal
-        for i in range(j + 1, n):
-            value = matrix[i, j]
-            for k in range(j):
-                value -= triangle[i, k] * triangle[j, k]
-            triangle[i, j] = value / diagonal
-    return triangle, True
+    """Lower Cholesky triangle L of a symmetric matrix (LAPACK's potrf, as numpy's), and whether it
+    is positive definite (False also for NaN or infinity)."""
+    try:
+        triangle = np.linalg.cholesky(matrix)
+    except Exception:  # numpy's LinAlgError; Numba catches exceptions by base class only
+        return np.zeros_like(matrix), False
+    # Numba's potrf does not check finiteness: a NaN or infinity below the diagonal reaches L's
+    # diagonal in its row.
+    return triangle, np.isfinite(np.diag(triangle)).all()
 
 
 @njit(cache=True, nogil=True)
 def cholesky_solve(triangle, right):
-    """x of L L^T x = right."""
+    """x of L L^T x = right: the two triangular solves of LAPACK's potrs (scipy's cho_solve),
+    written out: Numba offers no triangular solve, and a general one (np.linalg.solve) would
+    factor L again."""
     n = triangle.shape[0]
     x = right.copy()
     for i in range(n):
@@ -88,6 +84,10 @@ def reflect(row, reflector, j, tau):
 def householder(work):
     """Column-pivoted Householder QR of work^T, in place, as LAPACK's geqp3 pivots, stopped at the
     rank (the first remaining column norm at or below RANK_TOLERANCE times the largest, or 1).
+
+    A compiled copy because it runs inside the compiled level loop at every least-squares level:
+    scipy.linalg.qr(pivoting=True) called from Python cost 155-265 us on the levels' sizes (12 x 26
+    to 9 x 44) against 31-43 us here (tests/test_solver_kernels.py checks it against scipy's).
 
     work^T's columns are work's rows: Householder on rows keeps every inner loop contiguous. After
     step j, row c holds R[:j+1, c] in its first entries and, for c <= j, the reflector
