@@ -20,7 +20,13 @@ Measures in one run:
   (the machine's speed drifts between runs);
 - the time split of the qp run with 2 views on one thread by part (cProfile's own times grouped by
   function), and
-  the process's peak memory.
+  the process's peak memory;
+- each QP backend of the qp scheme (solvers.available_qp_solvers(): the compiled active set,
+  proxsuite, qpsolvers' installed solvers): `ibik track` with 2 views on one thread, its median step
+  with and without the image term, the backends in turn in each of --rounds rounds, each backend's
+  step over the default backend's (the median of the rounds' ratios: the machine's speed drifts
+  3x within a day, a ratio of figures taken together does not), its error and its trial's largest
+  joint distance to the default backend's trial (`--qp-backends-only` runs this part alone).
 
 Every frames/s figure is the median of --rounds rounds, which take the settings in turn (every
 round's figure is in the JSON as `<figure>_rounds`): a single run on this shared machine can fall
@@ -29,6 +35,7 @@ in a slow minute (the arm once 725 frames/s between runs of 1022-1120).
 A benchmark, not a test: absolute times on a shared 2-core machine are indicative, ratios less so.
 
 Usage: python experiments/benchmark.py --out out/benchmark [--json PATH] [--frames 120] [--rounds 3]
+       [--qp-backends-only]
 """
 
 from __future__ import annotations
@@ -61,6 +68,7 @@ from ibik_pin.app.job import TrackJob
 from ibik_pin.app.track import prepare_body
 from ibik_pin.io.files import strict_json
 from ibik_pin.io.trc import read_trc
+from ibik_pin.solvers import DEFAULT_QP_SOLVER, available_qp_solvers
 from ibik_pin.solvers.hqp import HierarchicalQPSolver
 from ibik_pin.tasks.base import GradientTask
 
@@ -73,7 +81,7 @@ PARTS = {
     "kinematics": ("configuration.py", "pinocchio"),
     "projection and sampling": ("pinhole.py", "camera.py", "tasks/image.py", "silhouette_axis.py", "segments.py"),
     "support images": ("support.py", "medial_axis.py", "distance.py", "frame_images.py", "GaussianBlur"),
-    "QP": ("_solve_level", "proxsuite", "_polish"),
+    "QP": ("qp_backends.py", "proxsuite", "qpsolvers", "daqp"),
     "linear algebra": ("nullspace.py", "level_loop.py", "solvers/kernels.py", "linalg", "einsum", "projection.py"),
     "solver and task bookkeeping": ("solvers/", "tasks/", "swivel.py", "tracker.py", "outcomes.py", "limits.py"),
     "reading masks, subject calibration, writing outputs": ("imread", "masks.py", "silhouette_files.py",
@@ -222,6 +230,54 @@ def step_rounds(inputs, run_folder: Path, frames: int, rounds: int) -> tuple[dic
     return ours, pink, ratios
 
 
+def qp_backend_rounds(inputs, run_folder: Path, rounds: int) -> dict:
+    """Every QP backend's `ibik track` (2 views, one thread), the backends in turn in each round.
+
+    Returns, per backend, its median steps [us] (medians over the rounds, every round's kept), its
+    step over the default backend's in the same round (the median of the rounds' ratios), its
+    judged error [mm] and the largest distance [mm] of its joints.trc to the default backend's."""
+    names = available_qp_solvers()
+    per_round: dict[str, list[dict]] = {name: [] for name in names}
+    for _ in range(rounds):
+        for name in names:
+            steps = StepTimer()
+            folder = run_folder.parent / f"qp_backend_{name}"
+            with steps.active():
+                run = run_variant(inputs, variant("ibik2v"), "clean", {"method": "qp", "qp_solver": name,
+                                                                       "read_ahead": "off"}, out=folder)
+            joints = read_trc(folder / "joints.trc").in_metres().positions
+            per_round[name].append({"step_with_image_us": steps.median_us(steps.image),
+                                    "step_without_image_us": steps.median_us(steps.blind),
+                                    "judged_error_mm": run.judged_mm, "joints": joints})
+    results: dict = {}
+    for name in names:
+        rows = per_round[name]
+        figures: dict = {"judged_error_mm": rows[-1]["judged_error_mm"],
+                         "max_joint_distance_to_default_mm": float(np.nanmax(np.linalg.norm(
+                             rows[-1]["joints"] - per_round[DEFAULT_QP_SOLVER][-1]["joints"], axis=2)) * 1000.0)}
+        for key in ("step_with_image_us", "step_without_image_us"):
+            figures[key] = float(np.median([row[key] for row in rows]))
+            figures[f"{key}_rounds"] = [row[key] for row in rows]
+            ratios = [row[key] / default[key] for row, default in zip(rows, per_round[DEFAULT_QP_SOLVER], strict=True)]
+            figures[f"{key.removesuffix('_us')}_over_default"] = float(np.median(ratios))
+            figures[f"{key.removesuffix('_us')}_over_default_rounds"] = ratios
+        results[name] = figures
+    return results
+
+
+def qp_backend_lines(backends: dict, rounds: int) -> list[str]:
+    """The backends' table."""
+    lines = [f"| QP backend (qp, 2 views, one thread; median of {rounds} rounds) | step with the image [us] | "
+             f"over {DEFAULT_QP_SOLVER} | step without [us] | over {DEFAULT_QP_SOLVER} | error [mm] | "
+             f"largest joint distance to {DEFAULT_QP_SOLVER}'s [mm] |",
+             "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
+    for name, values in backends.items():
+        lines.append(f"| {name} | {values['step_with_image_us']:.0f} | {values['step_with_image_over_default']:.2f} | "
+                     f"{values['step_without_image_us']:.0f} | {values['step_without_image_over_default']:.2f} | "
+                     f"{values['judged_error_mm']:.2f} | {values['max_joint_distance_to_default_mm']:.3g} |")
+    return lines
+
+
 def _mean_iterations(run_folder: Path) -> float | None:
     return json.loads((run_folder / "report.json").read_text()).get("mean_iterations_per_frame")
 
@@ -284,16 +340,30 @@ def main() -> None:
                         "in turn in each (default 3)")
     parser.add_argument("--cache", type=Path, help="where the rendered inputs are kept (default: OUT/cache; the "
                         "real-mocap benchmark's cache is reused when given)")
+    parser.add_argument("--qp-backends-only", action="store_true",
+                        help="time the QP backends alone (their table and JSON, nothing else)")
     arguments = parser.parse_args()
     arguments.out.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
+    cache = arguments.cache or arguments.out / "cache"
+    if arguments.qp_backends_only:
+        backends = qp_backend_rounds(prepare_inputs(BOXING, DATA, arguments.frames, cache),
+                                     cache.parent / "benchmark_runs" / "qp_2v", arguments.rounds)
+        table = "\n".join(qp_backend_lines(backends, arguments.rounds))
+        print(table)
+        (arguments.out / "benchmark.md").write_text(f"`python experiments/benchmark.py --out {arguments.out} "
+                                                    f"--qp-backends-only`\n\n{table}\n")
+        (arguments.json or arguments.out / "benchmark.json").write_text(strict_json(
+            {"qp_backends": backends, "frames": arguments.frames, "wall_s": time.perf_counter() - started}))
+        return
     arm = arm_fps(arguments.frames, arguments.rounds)
-    body, context, profile = whole_body(arguments.frames, arguments.cache or arguments.out / "cache", arguments.rounds)
+    body, context, profile = whole_body(arguments.frames, cache, arguments.rounds)
     steps, pink_results, ratios = step_rounds(context["inputs"], context["q_run"], arguments.frames,
                                               arguments.rounds)
+    backends = qp_backend_rounds(context["inputs"], context["q_run"], arguments.rounds)
     ours = body["qp"]["views_2"]
     ours.update(steps)
-    figures = {"arm": arm, "whole_body": body, "pink": pink_results, "ratios": ratios,
+    figures = {"arm": arm, "whole_body": body, "pink": pink_results, "ratios": ratios, "qp_backends": backends,
                "split_qp_2_views_s": time_split(profile),
                "peak_memory_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
                "frames": arguments.frames, "wall_s": time.perf_counter() - started}
@@ -321,6 +391,7 @@ def main() -> None:
               f"| ours, qp, without the image | {ours['step_without_image_us']:.0f} |"]
     lines += [f"| Pink + {backend} | {values['step_us']:.0f} |" for backend, values in pink_results.items()
               if isinstance(values, dict)]
+    lines += ["", *qp_backend_lines(backends, arguments.rounds)]
     lines += ["", "| part of the profiled qp run, 2 views, one thread (own time; numpy's small-array calls in "
               "\"other\") | [s] |",
               "| --- | ---: |"]

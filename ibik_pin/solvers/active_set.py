@@ -21,7 +21,7 @@ __all__ = ["primal_active_set", "within_bounds"]
 def primal_active_set(hessian: np.ndarray, linear: np.ndarray, constraint: np.ndarray, lower: np.ndarray,
                       upper: np.ndarray, feasibility: float) -> np.ndarray | None:
     """min 1/2 w'Hw + g'w s.t. lower <= C w <= upper by the primal active-set method; None if it
-    does not end (then proxsuite solves the level).
+    does not end (the level is then reported "failed": ActiveSetBackend).
 
     From w = 0 (feasible: the higher levels' step lies within the bounds), each iteration solves the
     KKT system of the bounds held, steps toward its answer until a bound blocks (then held) or

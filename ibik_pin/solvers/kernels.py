@@ -312,7 +312,7 @@ def active_set_method(hessian, linear, constraint, lower, upper, feasibility):
     n, rows = hessian.shape[0], constraint.shape[0]
     w = np.zeros(n)
     triangle, ok = cholesky(hessian)
-    if not ok:  # H is positive definite by construction; NaN or a broken level: proxsuite's turn
+    if not ok:  # H is positive definite by construction; NaN or a broken level: not ended
         return w, False
     held = np.empty(rows, dtype=np.int64)
     held_upper = np.empty(rows, dtype=np.bool_)  # which side of each held bound
@@ -331,7 +331,7 @@ def active_set_method(hessian, linear, constraint, lower, upper, feasibility):
                 for b in range(m):
                     schur[a, b] = row @ held_solved[b]
             schur_triangle, ok = cholesky(schur)
-            if not ok:  # held rows dependent (the feasibility margin prevents it): proxsuite's turn
+            if not ok:  # held rows (nearly) dependent, beyond what the feasibility margin prevents
                 return w, False
             multipliers = cholesky_solve(schur_triangle, right)
         if m == n:  # the held rows fix w

@@ -33,7 +33,8 @@ class LevelStatus(str, Enum):
     def __str__(self) -> str:  # the value, as format() and f-strings show it, on every Python
         return self.value
 
-    __format__ = str.__format__
+    def __format__(self, format_spec: str) -> str:
+        return format(self.value, format_spec)
 
     @property
     def definition(self) -> str:
