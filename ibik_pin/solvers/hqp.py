@@ -22,6 +22,7 @@ and its backends") gives the measurements behind the default.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import numpy as np
@@ -130,8 +131,8 @@ class HierarchicalQPSolver(Solver):
             if stopped == len(built):
                 break
             problem = LevelProblem(stopped, hessian, linear, null_basis, lower - dq, upper - dq, dq)
-            if problems is not None:
-                problems[stopped] = problem
+            if problems is not None:  # its own copy of Z: the first level's is the workspace's identity
+                problems[stopped] = problem = dataclasses.replace(problem, C=problem.C.copy())
             try:
                 w = self.backend.solve(problem)
             except QPBackendError as error:
