@@ -1,8 +1,7 @@
 """The whole-body human: example-robot-data's ISB model with Pose2Sim keypoints and segments.
 
 Built on the generic :class:`~ibik_pin.model.BodyModel`, with a third axis at each ankle
-(:mod:`ibik_pin.feet`) and, for a calibrated subject, segment radii scaled by its stature
-(:mod:`ibik_pin.subject.scaling`).
+(:mod:`ibik_pin.feet`) and, for a calibrated subject, segment radii scaled by its stature.
 """
 
 from __future__ import annotations
@@ -16,15 +15,21 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from ibik_pin.exceptions import FileFormatError
+from ibik_pin.exceptions import FileFormatError, InputError
 from ibik_pin.feet import add_foot_rotation
 from ibik_pin.io.files import checked_input_file
 from ibik_pin.model import BodyModel, add_keypoint_frame, built_from_urdf
-from ibik_pin.subject.scaling import HUMAN_NEUTRAL_STATURE_M, neutral_stature
 
 HUMAN_URDF_RELATIVE = Path("example-robot-data/robots/human_description/robots/human.urdf")
 #: Links of this prefix in a URDF are keypoints (``keypoint_Neck`` is the Neck), see load_human.
 KEYPOINT_LINK_PREFIX = "keypoint_"
+
+#: Head height above the lowest foot keypoint of example-robot-data's human at its neutral pose
+#: [m], measured by :func:`neutral_stature` (Head 0.693 m above the root, toes 1.049 m below).
+HUMAN_NEUTRAL_STATURE_M = 1.742
+
+#: The keypoints a stature is measured down to: the lowest of them is the sole.
+FOOT_KEYPOINTS = ("LAnkle", "RAnkle", "LHeel", "RHeel", "LBigToe", "RBigToe", "LSmallToe", "RSmallToe")
 
 
 def human_urdf_path() -> Path:
@@ -189,3 +194,21 @@ def with_hip_at_hip_joints_midpoint(body: BodyModel) -> BodyModel:
     model.frames[hip_id] = frame
     return dataclasses.replace(body, model=model, keypoints=dict(body.keypoints), segments=list(body.segments),
                                end_effectors=list(body.end_effectors))
+
+
+def neutral_stature(body: BodyModel) -> float:
+    """Head height above the lowest foot keypoint at the neutral pose [m] (Y up).
+
+    The default human measures :data:`HUMAN_NEUTRAL_STATURE_M` = 1.742 m.
+    """
+    feet = [name for name in FOOT_KEYPOINTS if name in body.keypoints]
+    if "Head" not in body.keypoints or not feet:
+        raise InputError(
+            f"body: expected keypoints Head and at least one of {list(FOOT_KEYPOINTS)} to measure a "
+            f"stature, got {list(body.keypoints)}"
+        )
+    model = body.model
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, pin.neutral(model))
+    lowest = min(data.oMf[body.frame_id(name)].translation[1] for name in feet)
+    return float(data.oMf[body.frame_id("Head")].translation[1] - lowest)

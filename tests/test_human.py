@@ -7,7 +7,7 @@ import pytest
 
 from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import FileFormatError
-from ibik_pin.human import human_urdf_path, load_human
+from ibik_pin.human import HUMAN_NEUTRAL_STATURE_M, human_urdf_path, load_human, neutral_stature
 
 
 def test_the_human_comes_from_the_installed_example_robot_data():
@@ -115,3 +115,7 @@ def test_the_foot_rotation_is_added_once_to_a_subject_urdf_written_and_read_back
     reloaded = load_human(tmp_path / "subject.urdf")
     assert reloaded.model.nq == human.model.nq
     assert [reloaded.model.names[j] for j in range(reloaded.model.njoints)] == list(human.model.names)
+
+
+def test_the_human_s_neutral_stature_is_measured_as_documented(human):
+    assert neutral_stature(human) == pytest.approx(HUMAN_NEUTRAL_STATURE_M, abs=5e-4)

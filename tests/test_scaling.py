@@ -4,13 +4,12 @@ import numpy as np
 import pytest
 
 from ibik_pin.exceptions import IbikWarning, InputError, UnknownNameError
+from ibik_pin.human import HUMAN_NEUTRAL_STATURE_M, neutral_stature
 from ibik_pin.io.asf_amc import read_asf_amc
 from ibik_pin.model import load_arm
 from ibik_pin.subject.scaling import (
-    HUMAN_NEUTRAL_STATURE_M,
     LENGTH_KEYPOINTS,
     keypoint_lengths,
-    neutral_stature,
     scale_from_stature,
     scale_human,
     segment_lengths_from_keypoints,
@@ -112,10 +111,6 @@ def test_lengths_measured_on_real_walking_scale_the_model_within_a_millimetre(hu
     achieved = keypoint_lengths(scale_human(human, lengths))
     for name, value in lengths.items():
         assert abs(achieved[name] - value) < MILLIMETRE, name
-
-
-def test_the_human_s_neutral_stature_is_measured_as_documented(human):
-    assert neutral_stature(human) == pytest.approx(HUMAN_NEUTRAL_STATURE_M, abs=5e-4)
 
 
 def test_scaling_from_stature_is_uniform(human):

@@ -30,8 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ibik_pin.exceptions import IbikWarning, InputError
+from ibik_pin.human import FOOT_KEYPOINTS
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD
-from ibik_pin.subject.scaling import FOOT_KEYPOINTS
 
 TRC_AXES = ("y-up", "z-up")
 AXES_DESCRIPTIONS = {

@@ -32,13 +32,12 @@ from ibik_pin.app.report import TrackingReport
 from ibik_pin.app.silhouette_files import load_silhouettes
 from ibik_pin.app.video_inputs import SilhouetteQualityReader, read_videos, restrict_to_subject
 from ibik_pin.exceptions import FileFormatError, IbikWarning, InputError
-from ibik_pin.human import load_human
+from ibik_pin.human import FOOT_KEYPOINTS, load_human
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, read_calibration
 from ibik_pin.io.trc import METRES_PER_UNIT, TrcData, read_trc
 from ibik_pin.model import BodyModel
 from ibik_pin.subject.calibration import calibrate_subject, check_subject_size
 from ibik_pin.subject.scaling import (
-    FOOT_KEYPOINTS,
     scale_from_stature,
     scale_human,
     segment_lengths_from_keypoints,

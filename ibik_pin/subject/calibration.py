@@ -78,6 +78,7 @@ import numpy as np
 import pinocchio as pin
 
 from ibik_pin.exceptions import InputError, UnknownNameError
+from ibik_pin.human import neutral_stature
 from ibik_pin.io.trc import read_trc
 from ibik_pin.model import BodyModel
 from ibik_pin.subject.calibration_result import CalibrationResult
@@ -88,7 +89,7 @@ from ibik_pin.subject.calibration_settings import (
     SHOULDER_KEYPOINTS,
     CalibrationSettings,
 )
-from ibik_pin.subject.scaling import keypoint_lengths, neutral_stature, scale_human, segment_lengths_from_keypoints
+from ibik_pin.subject.scaling import keypoint_lengths, scale_human, segment_lengths_from_keypoints
 from ibik_pin.subject.static_fit import StaticFit
 from ibik_pin.subject.static_fit_solver import solve_all, solve_poses
 

@@ -48,14 +48,13 @@ import numpy as np
 import pinocchio as pin
 
 from ibik_pin.exceptions import IbikWarning, InputError, UnknownNameError
+from ibik_pin.human import neutral_stature
 from ibik_pin.model import BodyModel
 
 __all__ = [
-    "HUMAN_NEUTRAL_STATURE_M",
     "LENGTH_KEYPOINTS",
     "MID_HIP",
     "keypoint_lengths",
-    "neutral_stature",
     "scale_from_stature",
     "scale_human",
     "scale_uniformly",
@@ -89,12 +88,6 @@ LENGTH_KEYPOINTS: dict[str, tuple[str, str]] = {
 # not enter the mean ratio that scales the segments nobody measured.
 _OFFSET_LENGTHS = frozenset({"pelvis_height", "neck_shoulder"})
 
-#: Head height above the lowest foot keypoint of example-robot-data's human at its neutral pose
-#: [m], measured by :func:`neutral_stature` (Head 0.693 m above the root, toes 1.049 m below).
-HUMAN_NEUTRAL_STATURE_M = 1.742
-
-#: The keypoints a stature is measured down to: the lowest of them is the sole.
-FOOT_KEYPOINTS = ("LAnkle", "RAnkle", "LHeel", "RHeel", "LBigToe", "RBigToe", "LSmallToe", "RSmallToe")
 _ALL = (1.0, 1.0, 1.0)
 _FORWARD = (1.0, 0.0, 0.0)
 _LATERAL = (0.0, 0.0, 1.0)
@@ -195,24 +188,6 @@ def keypoint_lengths(body: BodyModel, q: np.ndarray | None = None) -> dict[str, 
     return segment_lengths_from_keypoints(present, positions)
 
 
-def neutral_stature(body: BodyModel) -> float:
-    """Head height above the lowest foot keypoint at the neutral pose [m] (Y up).
-
-    The default human measures :data:`HUMAN_NEUTRAL_STATURE_M` = 1.742 m.
-    """
-    feet = [name for name in FOOT_KEYPOINTS if name in body.keypoints]
-    if "Head" not in body.keypoints or not feet:
-        raise InputError(
-            f"body: expected keypoints Head and at least one of {list(FOOT_KEYPOINTS)} to measure a "
-            f"stature, got {list(body.keypoints)}"
-        )
-    model = body.model
-    data = model.createData()
-    pin.framesForwardKinematics(model, data, pin.neutral(model))
-    lowest = min(data.oMf[body.frame_id(name)].translation[1] for name in feet)
-    return float(data.oMf[body.frame_id("Head")].translation[1] - lowest)
-
-
 def scale_uniformly(body: BodyModel, factor: float) -> BodyModel:
     """A copy of the body with every length (placements, centres of mass, radii) times ``factor``.
 
@@ -230,8 +205,8 @@ def scale_from_stature(body: BodyModel, stature_m: float) -> BodyModel:
     """A copy of the body scaled uniformly so that its neutral stature is ``stature_m``.
 
     Args:
-        body: the human (not modified); its neutral stature is measured by :func:`neutral_stature`
-            (1.742 m for example-robot-data's human, :data:`HUMAN_NEUTRAL_STATURE_M`).
+        body: the human (not modified); its neutral stature is measured by :func:`~ibik_pin.human.neutral_stature`
+            (1.742 m for example-robot-data's human, :data:`~ibik_pin.human.HUMAN_NEUTRAL_STATURE_M`).
         stature_m: the subject's Head height above the lowest foot keypoint, standing [m].
 
     Raises:
