@@ -19,7 +19,7 @@ import numpy as np
 import pinocchio as pin
 
 from ibik_pin.exceptions import FileFormatError, InputError, UnknownNameError
-from ibik_pin.io.native_output import captured_native_stderr
+from ibik_pin.native_output import captured_native_stderr
 
 # Joint names of the arms and legs (the human URDF's left_elbow_Z, the paper chains' elbow_Z, ...).
 LIMB_JOINT_WORDS = ("shoulder", "elbow", "wrist", "hip", "knee", "ankle")

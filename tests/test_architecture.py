@@ -17,8 +17,6 @@ EXPERIMENTS = PACKAGE.parent / "experiments"
 # File-opening calls: builtins.open and Path.open, OpenCV's readers, numpy's loaders, Path's readers.
 FILE_OPENING_CALLS = frozenset({"open", "imread", "imreadmulti", "VideoCapture", "load", "loadtxt", "genfromtxt",
                                 "fromfile", "read_text", "read_bytes"})
-# What vision may take from ibik_pin.io: the capture of a native library's stderr, no file in it.
-VISION_IO_ALLOWED = frozenset({"ibik_pin.io.native_output"})
 
 
 def module_name(path: Path) -> str:
@@ -141,9 +139,7 @@ def test_vision_computes_on_arrays_and_opens_no_file(name, path):
     called = [(node.lineno, node.func.id if isinstance(node.func, ast.Name) else getattr(node.func, "attr", None))
               for node in ast.walk(tree) if isinstance(node, ast.Call)]
     opening = [f"line {line}: {function}" for line, function in called if function in FILE_OPENING_CALLS]
-    readers = sorted(imported for imported in imported_names(path, name)
-                     if imported.startswith("ibik_pin.io") and imported not in VISION_IO_ALLOWED
-                     and imported.rpartition(".")[0] not in VISION_IO_ALLOWED)
+    readers = sorted(imported for imported in imported_names(path, name) if imported.startswith("ibik_pin.io"))
 
     assert opening == [], f"{name} opens files"
     assert readers == [], f"{name} imports file readers"

@@ -24,8 +24,8 @@ import numpy as np
 
 from ibik_pin.exceptions import FileFormatError, InputError
 from ibik_pin.io.files import PathLike
-from ibik_pin.io.native_output import captured_native_stderr
 from ibik_pin.io.png import decode_grey_png
+from ibik_pin.native_output import captured_native_stderr
 
 __all__ = ["IMAGE_SUFFIXES", "decode_mask", "list_mask_files", "mask_convention", "read_image", "read_mask"]
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from ibik_pin.exceptions import FileFormatError, InputError
 from ibik_pin.io.files import PathLike
-from ibik_pin.io.native_output import captured_native_stderr
+from ibik_pin.native_output import captured_native_stderr
 
 __all__ = ["VideoReader", "read_frames"]
 

@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 
 from ibik_pin.exceptions import InputError
-from ibik_pin.io.native_output import captured_native_stderr
+from ibik_pin.native_output import captured_native_stderr
 from ibik_pin.vision.mask_store import CroppedMasks
 
 __all__ = ["LANDMARKS", "MEDIAPIPE_INSTALL", "VideoPose", "detect_pose_in_frames", "learned_pose_available"]
