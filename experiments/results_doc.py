@@ -18,6 +18,8 @@ import statistics
 import sys
 from pathlib import Path
 
+from ibik_pin.solvers import DEFAULT_QP_SOLVER
+
 REPOSITORY = Path(__file__).resolve().parent.parent
 RESULTS = REPOSITORY / "experiments" / "results"
 DOCUMENT = REPOSITORY / "docs" / "results.md"
@@ -310,6 +312,8 @@ def virtual_section() -> list[str]:
 
 def speed_section() -> list[str]:
     data = load("benchmark.json")
+    if "arm" not in data:  # a run of the QP backends alone (qp_backends_section)
+        return []
 
     def rounds(figures: dict, key: str) -> str:
         values = figures.get(f"{key}_rounds")
@@ -356,6 +360,33 @@ def speed_section() -> list[str]:
         "tasks on the same keypoints, a posture task, limits in Pink's QP), alternated in the same process:",
         "",
         *table(["ratio of step times", "median", "range over rounds"], ratio_rows),
+        "",
+    ]
+
+
+def qp_backends_section() -> list[str]:
+    """The level QP's backends, from whichever result file holds the benchmark's `qp_backends`."""
+    for path in sorted(RESULTS.glob("*.json")):
+        data = json.loads(path.read_text(encoding="utf-8"))
+        if isinstance(data, dict) and "qp_backends" in data:
+            break
+    else:
+        return []
+    backends = data["qp_backends"]
+    rows = [[name, f"{values['step_with_image_us']:.0f}", f"{values['step_with_image_over_default']:.2f}",
+             f"{values['step_without_image_us']:.0f}", f"{values['step_without_image_over_default']:.2f}",
+             f"{values['judged_error_mm']:.2f}", f"{values['max_joint_distance_to_default_mm']:.3g}"]
+            for name, values in backends.items()]
+    default = DEFAULT_QP_SOLVER
+    return [
+        "### The level QP's backends",
+        "",
+        f"`python experiments/benchmark.py --out out/benchmark` (`experiments/results/{path.name}`): `ibik track`",
+        "on boxing_a with the qp scheme, 2 views, one thread, each backend in turn in every round; median",
+        f"steps, and each backend's step over the default backend's ({default}) in the same round:",
+        "",
+        *table(["backend", "step with the image [us]", f"over {default}", "step without [us]", f"over {default}",
+                "elbow error [mm]", f"largest joint distance to {default}'s [mm]"], rows),
         "",
     ]
 
@@ -408,7 +439,8 @@ def document() -> str:
         "",
     ]
     for section in (paper_section, real_mocap_section, held_out_section, pose2sim_section, priority_section,
-                    paper_tables_section, virtual_section, speed_section, batch_section, codecs_section):
+                    paper_tables_section, virtual_section, speed_section, qp_backends_section, batch_section,
+                    codecs_section):
         lines += section()
     return "\n".join(lines).rstrip("\n") + "\n"
 
