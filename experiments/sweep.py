@@ -31,8 +31,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from realdata.runner import DEFAULT_DATA, REPOSITORY, parse_settings
+from realdata.runner import DEFAULT_DATA, REPOSITORY, parse_settings, tracking_settings, variant
 from sweepkit.conditions import draw_condition, load_condition, write_condition
+from sweepkit.lengths import LENGTHS, image_static, oracle_static, reach_static
 from sweepkit.runs import markdown, run_condition_variant, summarize
 
 DEFAULTS = {"conditions": 42, "frames": 40, "rate": 30.0, "views": "1,2,4", "silhouettes": "clean,defects"}
@@ -70,6 +71,10 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--silhouettes", help="clean, defects (default both)")
     parser.add_argument("--set", dest="settings", action="append", default=[], metavar="KEY=VALUE",
                         help="override a TrackingSettings field for every run (repeatable)")
+    parser.add_argument("--lengths", choices=LENGTHS, default="static",
+                        help="limb lengths: the static's; refined on the trial's targets (reach) or on its "
+                             "targets and silhouettes (images; sweepkit/lengths.py); the trial's true ones "
+                             "(oracle, a diagnostic)")
     parser.add_argument("--keep", type=Path, default=None,
                         help="keep each condition's files under this folder, and reuse those already there")
     parser.add_argument("--quick", action="store_true", help="2 conditions of 12 frames, IBIK 2 views (a smoke test)")
@@ -104,13 +109,25 @@ def main(argv: list[str] | None = None) -> dict:
             if inputs is None or inputs.truth.shape[0] != arguments.frames:
                 inputs = write_condition(condition, arguments.data, arguments.frames, arguments.rate, folder,
                                          tuple(silhouettes))
-            conditions.append(inputs.condition.row())
+            static, refinement = None, {}
+            if arguments.lengths in ("reach", "images"):  # PIK's lengths: the targets' only
+                static, refinement["pik"] = reach_static(inputs)
+            elif arguments.lengths == "oracle":
+                static, refinement["pik"] = oracle_static(inputs)
+            conditions.append(dict(inputs.condition.row(), lengths=refinement))
             say(f"condition {index} ({condition.motion}, {condition.size[0]}x{condition.size[1]}, limbs "
                 f"x{condition.body.limb_radius_factor:.2f}, noise {condition.target_noise_mm:.1f} mm, "
                 f"toes {condition.toes}): inputs in {time.perf_counter() - rendering:.1f} s")
             chosen = [("pik", "clean")] + [(f"ibik{v}v", s) for s in silhouettes for v in views]
+            first_pass = None
             for name, kind in chosen:
-                run = run_condition_variant(inputs, name, kind, overrides).row()
+                run_static = static
+                if arguments.lengths == "images" and name != "pik":
+                    run_static, refinement[f"{name}/{kind}"] = image_static(
+                        inputs, first_pass, int(name[4:-1]), kind, tracking_settings(variant(name), kind, overrides))
+                result = run_condition_variant(inputs, name, kind, overrides, run_static)
+                first_pass = result.estimate if name == "pik" else first_pass
+                run = result.row()
                 runs.append(run)
                 groups = run["groups_mm"]
                 say(f"  {name:7s} {run['silhouettes']:8s} elbows {groups['elbows']:6.1f}  knees {groups['knees']:6.1f}"
@@ -128,11 +145,13 @@ def main(argv: list[str] | None = None) -> dict:
               f"A condition's figure is the mean over its frames of the group's joints; each cell is the median / "
               f"90th percentile of those over conditions. Targets: estimated target keypoints against the "
               f"noise-free mocap joints. PIK uses no image (one run stands for both silhouette columns). "
-              f"Settings overridden: {overrides or 'none'}. Wall time {wall:.0f} s on {platform.node()}; code at "
+              f"Settings overridden: {overrides or 'none'}; limb lengths: {arguments.lengths}. "
+              f"Wall time {wall:.0f} s on {platform.node()}; code at "
               f"{_revision()}.")
     arguments.out.mkdir(parents=True, exist_ok=True)
     result = {"command": command, "revision": _revision(), "seed": arguments.seed, "frames": arguments.frames,
-              "rate_hz": arguments.rate, "overrides": overrides, "wall_seconds": wall, "summary": summary,
+              "rate_hz": arguments.rate, "overrides": overrides, "lengths": arguments.lengths,
+              "wall_seconds": wall, "summary": summary,
               "conditions": conditions, "runs": runs}
     (arguments.out / "sweep.json").write_text(json.dumps(result, indent=1) + "\n")
     (arguments.out / "sweep.md").write_text(markdown(summary, header))

@@ -19,7 +19,7 @@ from realdata.runner import single_threaded_math, tracking_settings, variant
 
 from ibik_pin.app.job import TrackJob
 from ibik_pin.app.track import run_track
-from ibik_pin.io.trc import read_trc
+from ibik_pin.io.trc import TrcData, read_trc
 from sweepkit.conditions import ConditionInputs
 
 GROUPS = ("elbows", "knees", "targets")
@@ -34,6 +34,7 @@ class SweepRun:
             "none", the same run stands for both).
         errors: (F, 4) distance of LElbow, RElbow, LKnee, RKnee to the truth [m].
         target_errors: (F, T) distance of each target keypoint to its noise-free truth [m].
+        estimate: the run's joints.trc (every keypoint of the model) [m].
     """
 
     index: int
@@ -44,6 +45,7 @@ class SweepRun:
     errors: np.ndarray
     target_errors: np.ndarray
     wall_seconds: float
+    estimate: TrcData | None = None
 
     def groups_mm(self) -> dict[str, float]:
         return {"elbows": float(np.mean(self.errors[:, :2]) * 1e3), "knees": float(np.mean(self.errors[:, 2:]) * 1e3),
@@ -60,13 +62,14 @@ class SweepRun:
 
 
 def run_condition_variant(inputs: ConditionInputs, name: str, silhouettes: str, overrides: dict | None = None,
-                          ) -> SweepRun:
-    """``ibik track`` on the condition's files with the variant (IBIK: the first N cameras)."""
+                          static: Path | None = None) -> SweepRun:
+    """``ibik track`` on the condition's files with the variant (IBIK: the first N cameras);
+    `static`: another static file than the condition's."""
     chosen = variant(name)
     single_threaded_math()
     scratch = Path(tempfile.mkdtemp(prefix="sweep_"))
     job = TrackJob(
-        targets=inputs.targets, out=scratch / "run", static=inputs.static,
+        targets=inputs.targets, out=scratch / "run", static=static or inputs.static,
         calibration=inputs.calibration if chosen.views else None,
         masks=inputs.masks(silhouettes) if chosen.views else None,
         cameras=inputs.cameras[:chosen.views] if chosen.views else None,
@@ -88,7 +91,7 @@ def run_condition_variant(inputs: ConditionInputs, name: str, silhouettes: str, 
     target_errors = np.linalg.norm(positions(inputs.target_names) - truth, axis=2)
     condition = inputs.condition
     return SweepRun(condition.index, condition.motion, condition.kind, chosen.name,
-                    "none" if not chosen.views else silhouettes, errors, target_errors, wall)
+                    "none" if not chosen.views else silhouettes, errors, target_errors, wall, estimate)
 
 
 def _stats(values: list[float]) -> dict:
@@ -103,6 +106,8 @@ def summarize(runs: list[dict]) -> dict:
     summary: dict = {"all": {}, "by_kind": {}, "by_motion": {}}
     variants = list(dict.fromkeys(r["variant"] for r in runs))
     for silhouettes in ("clean", "defects"):
+        if not any(r["silhouettes"] == silhouettes for r in runs):
+            continue
         for name in variants:
             chosen = [r for r in runs if r["variant"] == name and r["silhouettes"] in (silhouettes, "none")]
             if not chosen:

@@ -1,0 +1,114 @@
+"""Limb lengths for a condition's runs: the static's, refined on the trial (ibik_pin.subject.
+trial_lengths), or the trial's true ones (a diagnostic). A refinement is written as another static
+file whose limb segments have the refined lengths (each segment scaled about its parent keypoint,
+the keypoints below it carried along), which ``ibik track --static`` then calibrates on.
+
+- "reach": every limb lengthened where its targets' 98th-percentile reach exceeds its segments' sum.
+- "images": the legs' lengths (one factor for both segments: the silhouettes, as the criteria read
+  them, tell a leg's length better than its split between thigh and shank) chosen on the views'
+  silhouettes around the PIK pose, pairs that cannot reach the targets excluded; the arms by reach
+  (the criteria put hanging arms against the trunk).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+from realdata.clips import STATIC_SPACING_S
+
+from ibik_pin.human import load_human
+from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, read_calibration
+from ibik_pin.io.trc import TrcData, read_trc, write_trc
+from ibik_pin.readahead.frame_images import frame_images
+from ibik_pin.subject.calibration import calibrate_static_trial
+from ibik_pin.subject.scaling import keypoint_lengths, segment_lengths_from_keypoints
+from ibik_pin.subject.trial_lengths import refine_from_images, refine_from_reach
+from ibik_pin.tasks.image import ImageTask
+from ibik_pin.tasks.silhouette_axis import SilhouetteAxisTask
+from ibik_pin.tracking.settings import TrackingSettings
+from ibik_pin.tracking.views import support_caps
+from ibik_pin.vision.camera import cameras_in_frame
+from sweepkit.conditions import ConditionInputs, _trc, drift_static
+
+# scaling's length names -> the static keypoint at the segment's far end (drift_static's child).
+SEGMENT_CHILDREN = {"left_thigh": "LKnee", "left_shank": "LAnkle", "right_thigh": "RKnee", "right_shank": "RAnkle",
+                    "left_upper_arm": "LElbow", "left_forearm": "LWrist", "right_upper_arm": "RElbow",
+                    "right_forearm": "RWrist"}
+LENGTHS = ("static", "reach", "images", "oracle")
+
+
+def _write_static(inputs: ConditionInputs, lengths: dict[str, float], wanted: dict[str, float], name: str) -> Path:
+    static = read_trc(inputs.static).in_metres()
+    factors = {SEGMENT_CHILDREN[segment]: wanted[segment] / lengths[segment] for segment in SEGMENT_CHILDREN
+               if segment in lengths and segment in wanted}
+    path = inputs.folder / f"static_{name}.trc"
+    write_trc(path, _trc(static.marker_names, drift_static(static.marker_names, static.positions, factors),
+                         1.0 / STATIC_SPACING_S))
+    return path
+
+
+def _report(before: dict[str, float], after: dict[str, float]) -> dict:
+    return {name: {"static_mm": 1e3 * before[name], "trial_mm": 1e3 * after[name],
+                   "change_mm": 1e3 * (after[name] - before[name])} for name in SEGMENT_CHILDREN if name in before}
+
+
+def static_lengths(inputs: ConditionInputs) -> dict[str, float]:
+    static = read_trc(inputs.static).in_metres()
+    return segment_lengths_from_keypoints(static.marker_names, static.positions)
+
+
+def reach_static(inputs: ConditionInputs) -> tuple[Path, dict]:
+    """The static with every limb lengthened as far as the trial's targets need."""
+    lengths = static_lengths(inputs)
+    targets = read_trc(inputs.targets).in_metres()
+    refined = refine_from_reach(lengths, targets.marker_names, targets.positions)
+    return _write_static(inputs, lengths, refined.lengths, "reach"), _report(lengths, refined.lengths)
+
+
+def oracle_static(inputs: ConditionInputs) -> tuple[Path, dict]:
+    """The static with the trial's true limb lengths (a diagnostic: what lengths are worth)."""
+    lengths = static_lengths(inputs)
+    wanted = segment_lengths_from_keypoints(inputs.truth_names, inputs.truth)
+    return _write_static(inputs, lengths, wanted, "oracle"), _report(lengths, wanted)
+
+
+def image_static(inputs: ConditionInputs, estimate: TrcData, views: int, silhouettes: str,
+                 settings: TrackingSettings | None = None) -> tuple[Path, dict]:
+    """The static with the legs' lengths the first `views` cameras' silhouettes prefer around the
+    pose `estimate` (a PIK run's joints.trc), the arms' by reach."""
+    settings = settings or TrackingSettings()
+    body = calibrate_static_trial(inputs.static, load_human()).body
+    model_lengths = keypoint_lengths(body)
+    cameras = cameras_in_frame(read_calibration(inputs.calibration), POSE2SIM_TRC_TO_WORLD)[:views]
+    targets = read_trc(inputs.targets).in_metres()
+    centre = np.nanmean(targets.positions[:, targets.marker_names.index("Hip")], axis=0)
+    caps = support_caps(cameras, centre)
+    scales = support_caps(cameras, centre, settings.axis_scale)
+    folder = inputs.masks(silhouettes)
+
+    def source(frame: int) -> list[np.ndarray]:
+        return [cv2.imread(str(folder / camera.name / f"{frame:06d}.png"), cv2.IMREAD_GRAYSCALE) > 127
+                for camera in cameras]
+
+    image_task = ImageTask(body, samples_per_segment=settings.samples_per_segment)
+    axis_task = SilhouetteAxisTask(body)
+
+    def frames():
+        for frame in range(estimate.positions.shape[0]):
+            images = frame_images(source, cameras, caps, scales, frame)
+            image_task.set_views(images.views)
+            axis_task.set_views(images.axis_views)
+            keypoints = {name: estimate.positions[frame, k] for k, name in enumerate(estimate.marker_names)}
+            yield keypoints, [(image_task, 1.0), (axis_task, settings.axis_weight)]
+
+    legs = refine_from_images(body, model_lengths, frames(), limbs=("left_leg", "right_leg"), keep_ratio=True)
+    arms = refine_from_reach(model_lengths, targets.marker_names, targets.positions, limbs=("left_arm", "right_arm"))
+    lengths = static_lengths(inputs)
+    wanted = dict(lengths)
+    for name in SEGMENT_CHILDREN:
+        refined = legs.lengths[name] if "thigh" in name or "shank" in name else arms.lengths[name]
+        wanted[name] = lengths[name] * refined / model_lengths[name]
+    report = dict(_report(lengths, wanted), evidence=legs.evidence)
+    return _write_static(inputs, lengths, wanted, f"images{views}v_{silhouettes}"), report

@@ -1,0 +1,294 @@
+"""Limb segment lengths refined on the trial itself: its targets and its silhouettes.
+
+Joint centres computed from skin markers are not rigid across takes: a boxer's thighs measured
+13-30 mm longer in the trial than in the static take. With the hips and ankles met exactly, a leg
+too short is straighter than the truth and one too long more bent, and the knee's error is then
+its distance from the hip-ankle line, which no swivel can repair. On the sweep (experiments/
+sweep.py) the knees' error decomposed mostly that way: a shank 4 % long put the knee's circle
+30 mm too wide while its swivel was within 5-15 degrees.
+
+Two kinds of evidence, both from the trial:
+
+- its targets: a limb's two ends (hip and ankle, shoulder and wrist) are never farther apart than
+  its two segments' sum. A high quantile of the end-to-end distance over the trial is a lower
+  bound of that sum (:func:`reach_bounds`, :func:`refine_from_reach`); it says nothing when the
+  limb stays bent (a boxer's guard).
+- its silhouettes: for each candidate pair of lengths (a grid of factors on the calibrated ones),
+  every frame's middle joint is placed on the circle those lengths give between the limb's ends,
+  at the swivel the image criterion prefers; the pair whose frames explain the silhouettes best
+  wins (:func:`refine_from_images`). A bent limb shows where its middle joint is (the kink of its
+  silhouette); a straight one shows only the sum, and the reach already bounds it from below.
+  A pair that cannot reach the limb's targets in more than a few frames is not a candidate.
+
+The result says, per segment, the calibrated length, the refined one and the change, for a
+report (TrialLengths.report).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ibik_pin.exceptions import InputError
+from ibik_pin.model import BodyModel
+from ibik_pin.tasks.segments import SegmentCriterion
+
+__all__ = ["DEFAULT_FACTORS", "LIMBS", "Limb", "TrialLengths", "reach_bounds", "refine_from_images",
+           "refine_from_reach"]
+
+
+@dataclass(frozen=True)
+class Limb:
+    """A two-segment limb: its keypoints root -> middle -> end and the names of its two lengths
+    (ibik_pin.subject.scaling's length names)."""
+
+    root: str
+    middle: str
+    end: str
+    upper: str
+    lower: str
+
+
+LIMBS: dict[str, Limb] = {
+    "left_leg": Limb("LHip", "LKnee", "LAnkle", "left_thigh", "left_shank"),
+    "right_leg": Limb("RHip", "RKnee", "RAnkle", "right_thigh", "right_shank"),
+    "left_arm": Limb("LShoulder", "LElbow", "LWrist", "left_upper_arm", "left_forearm"),
+    "right_arm": Limb("RShoulder", "RElbow", "RWrist", "right_upper_arm", "right_forearm"),
+}
+#: Factors tried on each calibrated length: +-6 %, by 1.5 % (a static take was seen 3-7 % off).
+DEFAULT_FACTORS = np.linspace(0.94, 1.06, 9)
+
+
+@dataclass
+class TrialLengths:
+    """Segment lengths after a refinement on a trial.
+
+    Attributes:
+        lengths: every length given, refined where the evidence said so [m].
+        before: the lengths given [m].
+        evidence: per limb, what decided (e.g. {"kind": "images", "frames": 40, "factors": [1.03, 0.97],
+            "gain": 0.12}).
+    """
+
+    lengths: dict[str, float]
+    before: dict[str, float]
+    evidence: dict[str, dict] = field(default_factory=dict)
+
+    @property
+    def changes(self) -> dict[str, float]:
+        """Length name -> refined minus given [m], for the lengths that changed."""
+        return {name: self.lengths[name] - self.before[name] for name in self.lengths
+                if abs(self.lengths[name] - self.before[name]) > 0.0}
+
+    def report(self) -> dict:
+        """Per segment: given and refined length and change [mm]; per limb, the evidence."""
+        return {"segments_mm": {name: {"static": 1e3 * self.before[name], "trial": 1e3 * self.lengths[name],
+                                       "change": 1e3 * (self.lengths[name] - self.before[name])}
+                                for name in self.lengths},
+                "evidence": self.evidence}
+
+
+def _limbs(limbs: Sequence[str] | None) -> list[str]:
+    names = list(LIMBS) if limbs is None else list(limbs)
+    unknown = [name for name in names if name not in LIMBS]
+    if unknown:
+        raise InputError(f"limbs: unknown {unknown}; known: {', '.join(LIMBS)}")
+    return names
+
+
+def reach_bounds(names: Sequence[str], targets: np.ndarray, quantile: float = 0.98,
+                 limbs: Sequence[str] | None = None) -> dict[str, float]:
+    """Per limb whose two ends are targets, the `quantile` of their distance over the frames [m]: a
+    lower bound of its two segments' sum (noise aside).
+
+    Args:
+        names: the K target names; targets: (F, K, 3) [m], NaN where absent.
+    """
+    targets = np.asarray(targets, dtype=float)
+    if targets.ndim != 3 or targets.shape[1:] != (len(names), 3):
+        raise InputError(f"targets: expected shape (F, {len(names)}, 3) [m], got {targets.shape}")
+    if not 0.0 < quantile <= 1.0:
+        raise InputError(f"quantile: expected a fraction in (0, 1], got {quantile}")
+    index = {name: k for k, name in enumerate(names)}
+    bounds = {}
+    for name in _limbs(limbs):
+        limb = LIMBS[name]
+        if limb.root not in index or limb.end not in index:
+            continue
+        reach = np.linalg.norm(targets[:, index[limb.end]] - targets[:, index[limb.root]], axis=1)
+        reach = reach[np.isfinite(reach)]
+        if reach.size:
+            bounds[name] = float(np.quantile(reach, quantile))
+    return bounds
+
+
+def refine_from_reach(lengths: Mapping[str, float], names: Sequence[str], targets: np.ndarray,
+                      quantile: float = 0.98, slack: float = 0.003,
+                      limbs: Sequence[str] | None = None) -> TrialLengths:
+    """Lengthen a limb whose segments cannot reach its targets' `quantile` distance (+ `slack` [m],
+    the bend a limb keeps at full stretch): both segments by the same factor. Shorter never: a
+    bent limb's reach says nothing of its length."""
+    before = {name: float(value) for name, value in lengths.items()}
+    refined = dict(before)
+    evidence = {}
+    for name, bound in reach_bounds(names, targets, quantile, limbs).items():
+        limb = LIMBS[name]
+        if limb.upper not in before or limb.lower not in before:
+            continue
+        total = before[limb.upper] + before[limb.lower]
+        factor = max(1.0, (bound + slack) / total)
+        refined[limb.upper], refined[limb.lower] = factor * before[limb.upper], factor * before[limb.lower]
+        evidence[name] = {"kind": "reach", "reach_m": bound, "sum_m": total, "factor": factor}
+    return TrialLengths(refined, before, evidence)
+
+
+def _circle_frames(root: np.ndarray, middle: np.ndarray, end: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The limb's axis (unit, root to end), its length, and two unit vectors across it, the first
+    toward the middle joint (any perpendicular for a straight limb)."""
+    axis = end - root
+    distance = float(np.linalg.norm(axis))
+    axis = axis / max(distance, 1e-9)
+    radial = (middle - root) - ((middle - root) @ axis) * axis
+    if np.linalg.norm(radial) < 1e-6:
+        radial = np.cross(axis, [0.0, 1.0, 0.0])
+        if np.linalg.norm(radial) < 1e-6:
+            radial = np.cross(axis, [1.0, 0.0, 0.0])
+    first = radial / np.linalg.norm(radial)
+    return axis, distance, first, np.cross(axis, first)
+
+
+def _candidates(root: np.ndarray, middle: np.ndarray, end: np.ndarray, uppers: np.ndarray, lowers: np.ndarray,
+                swivels: int, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    """Middle-joint candidates (G, A, 3) for G pairs of segment lengths [m] at A swivels, and
+    whether each pair reaches the limb's ends (G,) (within `tolerance` [m]; a pair that cannot
+    is placed straight, its segments in proportion)."""
+    axis, distance, first, second = _circle_frames(root, middle, end)
+    reaches = uppers + lowers >= distance - tolerance
+    along = (uppers**2 - lowers**2 + distance**2) / (2.0 * max(distance, 1e-9))
+    straight = uppers + lowers <= distance
+    along = np.where(straight, distance * uppers / (uppers + lowers), along)
+    radius = np.sqrt(np.maximum(uppers**2 - along**2, 0.0))
+    radius = np.where(straight, 0.0, radius)
+    angles = 2.0 * np.pi * np.arange(swivels) / swivels
+    ring = np.cos(angles)[:, None] * first + np.sin(angles)[:, None] * second  # (A, 3)
+    points = root + along[:, None, None] * axis + radius[:, None, None] * ring[None]
+    return points, reaches
+
+
+def refine_from_images(
+    body: BodyModel,
+    lengths: Mapping[str, float],
+    frames: Iterable[tuple[Mapping[str, np.ndarray], Sequence[tuple[SegmentCriterion, float]]]],
+    factors: np.ndarray = DEFAULT_FACTORS,
+    swivels: int = 24,
+    reach_tolerance: float = 0.005,
+    unreachable_fraction: float = 0.05,
+    min_gain: float = 0.0,
+    limbs: Sequence[str] | None = None,
+    keep_ratio: bool = False,
+) -> TrialLengths:
+    """Each limb's two lengths, chosen on a grid of factors, by how well the trial's silhouettes
+    are explained with them.
+
+    For every pair of factors (f_upper, f_lower) and every frame, the middle joint is placed on the
+    circle of radius given by the lengths f * (the calibrated lengths) between the limb's ends where
+    the frame's pose left them, at `swivels` points; the frame's score is the best weighted sum of
+    the criteria over the circle, and a pair's score the sum over the frames. The best pair wins
+    if its score beats the calibrated pair's (1, 1) by more than `min_gain` of the scores' spread
+    over the grid (a flat criterion keeps the calibrated lengths); a pair that cannot reach the
+    ends (within `reach_tolerance`) in more than `unreachable_fraction` of the frames is not a
+    candidate, and neither then is (1, 1): the reach alone then moves the lengths to the best pair
+    that reaches.
+
+    Args:
+        body: the body model the criteria were built on (its keypoints name their frames).
+        lengths: the calibrated lengths [m] (scaling's names; the limbs' upper and lower needed).
+        frames: per frame, keypoint name -> position (3,) [m] of the pose a first pass found (its
+            limbs' ends on their targets; every keypoint the criteria read), and (criterion,
+            weight) pairs with that frame's views set (the tracker's image terms:
+            tasks.image.ImageTask, tasks.silhouette_axis.SilhouetteAxisTask).
+        factors: the factors tried on each length.
+        swivels: points per circle.
+        limbs: the limbs refined (default: every limb of LIMBS whose keypoints the body has).
+        keep_ratio: scale both segments of a limb by the same factor (the static's split kept).
+
+    Returns:
+        The lengths, the limbs' evidence (frames, factors chosen, gain, unreachable frames).
+    """
+    factors = np.asarray(factors, dtype=float)
+    if factors.ndim != 1 or factors.size < 1 or np.any(factors <= 0.0):
+        raise InputError(f"factors: expected positive factors, got {factors}")
+    if int(swivels) < 3:
+        raise InputError(f"swivels: expected at least 3 points per circle, got {swivels}")
+    chosen = [name for name in _limbs(limbs) if all(getattr(LIMBS[name], k) in body.keypoints
+                                                    for k in ("root", "middle", "end"))
+              and LIMBS[name].upper in lengths and LIMBS[name].lower in lengths]
+    grid_upper, grid_lower = ((factors, factors) if keep_ratio else
+                              (g.reshape(-1) for g in np.meshgrid(factors, factors, indexing="ij")))
+    identity = int(np.argmin(np.abs(grid_upper - 1.0) + np.abs(grid_lower - 1.0)))
+    ids = {name: body.frame_ids([LIMBS[name].root, LIMBS[name].middle, LIMBS[name].end]) for name in chosen}
+    scores = {name: np.zeros(grid_upper.size) for name in chosen}
+    unreachable = {name: np.zeros(grid_upper.size) for name in chosen}
+    count = 0
+    frame_names = {int(frame_id): name for name, frame_id in zip(body.keypoints, body.frame_ids(list(body.keypoints)),
+                                                                  strict=True)}
+
+    def positions_of(keypoints: Mapping[str, np.ndarray], frame_ids: np.ndarray) -> np.ndarray:
+        try:
+            return np.array([keypoints[frame_names[int(frame_id)]] for frame_id in frame_ids], dtype=float)
+        except KeyError as error:
+            raise InputError(f"frames: the pose lacks keypoint {error}, which a criterion reads") from None
+
+    for keypoints, terms in frames:
+        count += 1
+        moves, placements = [], []
+        for name in chosen:
+            root, middle, end = positions_of(keypoints, ids[name])
+            limb = LIMBS[name]
+            points, reaches = _candidates(root, middle, end, grid_upper * lengths[limb.upper],
+                                          grid_lower * lengths[limb.lower], int(swivels), reach_tolerance)
+            unreachable[name] += ~reaches
+            placements.append(points)
+            moves.append(ids[name][1])
+        values = np.zeros((len(chosen), grid_upper.size, int(swivels)))
+        for task, weight in terms:
+            if weight == 0.0 or not getattr(task, "enabled", True):
+                continue
+            current = positions_of(keypoints, task.frame_ids)
+            pose = task.at_pose(current)
+            task_moves, movers = [], []
+            for limb, (middle_id, points) in enumerate(zip(moves, placements, strict=True)):
+                rows = np.flatnonzero(task.frame_ids == middle_id)
+                if rows.size:
+                    task_moves.append((rows, points.reshape(-1, 3)))
+                    movers.append(limb)
+            if task_moves:
+                for limb, limb_values in zip(movers, task.values_at_moves(current, pose, task_moves), strict=True):
+                    values[limb] += weight * np.asarray(limb_values).reshape(grid_upper.size, int(swivels))
+        for limb, name in enumerate(chosen):
+            scores[name] += values[limb].max(axis=1)
+    before = {name: float(value) for name, value in lengths.items()}
+    refined = dict(before)
+    evidence = {}
+    for name in chosen:
+        if count == 0:
+            break
+        allowed = unreachable[name] <= unreachable_fraction * count
+        if not allowed.any():
+            allowed = unreachable[name] == unreachable[name].min()
+        score = np.where(allowed, scores[name], -np.inf)
+        best = int(np.argmax(score))
+        spread = float(score[allowed].max() - score[allowed].min())
+        gain = (float(score[best] - score[identity]) / spread) if allowed[identity] and spread > 0.0 else None
+        if allowed[identity] and (gain is None or gain <= min_gain):
+            best = identity
+        limb = LIMBS[name]
+        refined[limb.upper] = float(grid_upper[best]) * before[limb.upper]
+        refined[limb.lower] = float(grid_lower[best]) * before[limb.lower]
+        evidence[name] = {"kind": "images", "frames": count, "factors": [float(grid_upper[best]),
+                                                                          float(grid_lower[best])],
+                          "gain": gain, "calibrated_reaches": bool(allowed[identity]),
+                          "unreachable_frames_calibrated": int(unreachable[name][identity])}
+    return TrialLengths(refined, before, evidence)

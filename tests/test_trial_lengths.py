@@ -1,0 +1,108 @@
+"""Limb lengths refined on a trial: the reach bound and the search over the silhouettes' evidence."""
+
+import numpy as np
+import pytest
+
+from ibik_pin.exceptions import InputError
+from ibik_pin.subject.trial_lengths import reach_bounds, refine_from_images, refine_from_reach
+
+NAMES = ["LHip", "LKnee", "LAnkle"]
+THIGH, SHANK = 0.42, 0.40
+
+
+class _Body:
+    """The little of a BodyModel the refinement reads: keypoint names and their frame ids."""
+
+    def __init__(self):
+        self.keypoints = {name: 10 + k for k, name in enumerate(NAMES)}
+
+    def frame_ids(self, names):
+        return np.array([self.keypoints[name] for name in names])
+
+
+class _PeakAt:
+    """A criterion whose value is highest where the knee is at `truth[frame]`: -distance^2."""
+
+    enabled = True
+
+    def __init__(self, truth: np.ndarray | None):
+        self.truth = truth
+        self.frame_ids = np.array([10, 11, 12])
+
+    def at_pose(self, current):
+        return None
+
+    def values_at_moves(self, current, pose, moves):
+        if self.truth is None:  # flat: every candidate alike
+            return [np.zeros(len(points)) for _, points in moves]
+        return [-np.sum((points - self.truth) ** 2, axis=1) for _, points in moves]
+
+
+def _leg(frames: int, bend_deg: np.ndarray, thigh: float = THIGH, shank: float = SHANK, seed: int = 0):
+    """Hip, knee, ankle (F, 3, 3) [m] of a leg bent by `bend_deg` at the knee, swivelled at random."""
+    rng = np.random.default_rng(seed)
+    legs = np.zeros((frames, 3, 3))
+    for frame in range(frames):
+        bend = np.radians(bend_deg[frame])
+        swivel = rng.uniform(-0.5, 0.5)
+        hip = np.array([0.0, 0.9, 0.1])
+        thigh_direction = np.array([np.sin(0.3 * bend) * np.cos(swivel), -np.cos(0.3 * bend),
+                                    np.sin(0.3 * bend) * np.sin(swivel)])
+        knee = hip + thigh * thigh_direction
+        shank_direction = np.array([-np.sin(0.7 * bend) * np.cos(swivel), -np.cos(0.7 * bend),
+                                    -np.sin(0.7 * bend) * np.sin(swivel)])
+        legs[frame] = hip, knee, knee + shank * shank_direction
+    return legs
+
+
+def test_the_reach_bound_is_a_high_quantile_of_the_end_to_end_distance():
+    legs = _leg(50, np.linspace(5.0, 60.0, 50))
+    reach = np.linalg.norm(legs[:, 2] - legs[:, 0], axis=1)
+    bounds = reach_bounds(NAMES, legs, quantile=1.0)
+    assert bounds["left_leg"] == pytest.approx(reach.max(), abs=1e-12)
+    assert bounds["left_leg"] <= THIGH + SHANK
+    assert "right_leg" not in bounds
+
+
+def test_the_reach_lengthens_a_limb_too_short_for_its_targets_and_never_shortens_one():
+    legs = _leg(50, np.full(50, 3.0))
+    short = refine_from_reach({"left_thigh": 0.95 * THIGH, "left_shank": 0.95 * SHANK}, NAMES, legs, slack=0.0)
+    total = short.lengths["left_thigh"] + short.lengths["left_shank"]
+    assert total == pytest.approx(reach_bounds(NAMES, legs)["left_leg"], abs=1e-9)
+    assert short.lengths["left_thigh"] / short.lengths["left_shank"] == pytest.approx(THIGH / SHANK, rel=1e-12)
+    long = refine_from_reach({"left_thigh": 1.05 * THIGH, "left_shank": 1.05 * SHANK}, NAMES, legs)
+    assert long.changes == {}
+
+
+def test_the_image_search_finds_the_lengths_whose_knee_the_criterion_prefers():
+    legs = _leg(30, np.linspace(20.0, 70.0, 30))
+    calibrated = {"left_thigh": THIGH / 1.03, "left_shank": SHANK / 0.97}
+    # The first pass's knee: on the circle of the calibrated lengths, which the criterion will not prefer.
+    frames = [({"LHip": leg[0], "LKnee": leg[1], "LAnkle": leg[2]}, [(_PeakAt(leg[1]), 1.0)]) for leg in legs]
+    refined = refine_from_images(_Body(), calibrated, frames, factors=np.linspace(0.94, 1.06, 9), swivels=72)
+    assert refined.lengths["left_thigh"] == pytest.approx(THIGH, rel=0.004)
+    assert refined.lengths["left_shank"] == pytest.approx(SHANK, rel=0.004)
+    assert refined.evidence["left_leg"]["frames"] == 30
+    assert set(refined.report()["segments_mm"]) == {"left_thigh", "left_shank"}
+
+
+def test_a_flat_criterion_keeps_the_calibrated_lengths_unless_they_cannot_reach():
+    legs = _leg(20, np.linspace(20.0, 60.0, 20))
+    frames = [({"LHip": leg[0], "LKnee": leg[1], "LAnkle": leg[2]}, [(_PeakAt(None), 1.0)]) for leg in legs]
+    kept = refine_from_images(_Body(), {"left_thigh": THIGH, "left_shank": SHANK}, frames)
+    assert kept.changes == {}
+    straight = _leg(20, np.full(20, 2.0))
+    frames = [({"LHip": leg[0], "LKnee": leg[1], "LAnkle": leg[2]}, [(_PeakAt(None), 1.0)]) for leg in straight]
+    short = refine_from_images(_Body(), {"left_thigh": 0.95 * THIGH, "left_shank": 0.95 * SHANK}, frames)
+    reach = np.linalg.norm(straight[:, 2] - straight[:, 0], axis=1).max()
+    assert short.lengths["left_thigh"] + short.lengths["left_shank"] >= reach - 0.005
+    assert short.evidence["left_leg"]["calibrated_reaches"] is False
+
+
+def test_bad_arguments_are_refused_with_what_was_expected():
+    with pytest.raises(InputError, match="targets: expected shape"):
+        reach_bounds(NAMES, np.zeros((4, 2, 3)))
+    with pytest.raises(InputError, match="limbs: unknown"):
+        reach_bounds(NAMES, np.zeros((4, 3, 3)), limbs=["tail"])
+    with pytest.raises(InputError, match="factors"):
+        refine_from_images(_Body(), {}, [], factors=np.array([0.0, 1.0]))
