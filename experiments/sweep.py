@@ -78,6 +78,8 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--keep", type=Path, default=None,
                         help="keep each condition's files under this folder, and reuse those already there")
     parser.add_argument("--quick", action="store_true", help="2 conditions of 12 frames, IBIK 2 views (a smoke test)")
+    parser.add_argument("--merge", type=Path, nargs="+", default=None, metavar="JSON",
+                        help="write the tables of these sweep.json files' runs together (no run)")
     parser.add_argument("--quiet", action="store_true")
     arguments = parser.parse_args(argv)
     preset = QUICK if arguments.quick else DEFAULTS
@@ -99,7 +101,14 @@ def main(argv: list[str] | None = None) -> dict:
 
     started = time.perf_counter()
     conditions, runs = [], []
-    for index in range(arguments.first, arguments.first + arguments.conditions):
+    parts = [json.loads(path.read_text()) for path in arguments.merge or ()]
+    for part in parts:
+        conditions += part["conditions"]
+        runs += part["runs"]
+    if parts:
+        arguments.conditions = len(conditions)
+        overrides, arguments.lengths = parts[0]["overrides"], parts[0]["lengths"]
+    for index in range(arguments.first, arguments.first + (0 if parts else arguments.conditions)):
         condition = draw_condition(index, arguments.seed)
         folder = (arguments.keep / f"condition_{index:03d}" if arguments.keep
                   else Path(tempfile.mkdtemp(prefix=f"sweep_{index:03d}_")))
@@ -135,7 +144,7 @@ def main(argv: list[str] | None = None) -> dict:
         finally:
             if arguments.keep is None:
                 shutil.rmtree(folder, ignore_errors=True)
-    wall = time.perf_counter() - started
+    wall = time.perf_counter() - started + sum(part["wall_seconds"] for part in parts)
     summary = summarize(runs)
     command = " ".join(["python experiments/sweep.py", *(sys.argv[1:] if argv is None else argv)])
     header = (f"# Sweep benchmark (`{command}`)\n\n"

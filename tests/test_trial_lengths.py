@@ -4,7 +4,9 @@ import numpy as np
 import pytest
 
 from ibik_pin.exceptions import InputError
-from ibik_pin.subject.trial_lengths import reach_bounds, refine_from_images, refine_from_reach
+from ibik_pin.human import load_human
+from ibik_pin.subject.scaling import keypoint_lengths
+from ibik_pin.subject.trial_lengths import apply_lengths, reach_bounds, refine_from_images, refine_from_reach
 
 NAMES = ["LHip", "LKnee", "LAnkle"]
 THIGH, SHANK = 0.42, 0.40
@@ -106,3 +108,16 @@ def test_bad_arguments_are_refused_with_what_was_expected():
         reach_bounds(NAMES, np.zeros((4, 3, 3)), limbs=["tail"])
     with pytest.raises(InputError, match="factors"):
         refine_from_images(_Body(), {}, [], factors=np.array([0.0, 1.0]))
+
+
+def test_applying_refined_lengths_changes_those_segments_of_the_model_and_no_other():
+    body = load_human()
+    lengths = keypoint_lengths(body)
+    legs = _leg(10, np.full(10, 2.0), thigh=1.04 * lengths["left_thigh"], shank=1.04 * lengths["left_shank"])
+    refined = refine_from_reach(lengths, NAMES, legs, slack=0.0)
+    assert set(refined.changes) == {"left_thigh", "left_shank"}
+    after = keypoint_lengths(apply_lengths(body, refined))
+    for name, value in lengths.items():
+        expected = refined.lengths[name] if name in refined.changes else value
+        assert after[name] == pytest.approx(expected, abs=1e-6), name
+    assert apply_lengths(body, refine_from_reach(lengths, NAMES, legs[:, :, :] * 0.5)) is body

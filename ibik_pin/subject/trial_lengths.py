@@ -33,10 +33,11 @@ import numpy as np
 
 from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
+from ibik_pin.subject.scaling import keypoint_lengths, scale_human
 from ibik_pin.tasks.segments import SegmentCriterion
 
-__all__ = ["DEFAULT_FACTORS", "LIMBS", "Limb", "TrialLengths", "reach_bounds", "refine_from_images",
-           "refine_from_reach"]
+__all__ = ["DEFAULT_FACTORS", "LIMBS", "Limb", "TrialLengths", "apply_lengths", "reach_bounds",
+           "refine_from_images", "refine_from_reach"]
 
 
 @dataclass(frozen=True)
@@ -292,3 +293,11 @@ def refine_from_images(
                           "gain": gain, "calibrated_reaches": bool(allowed[identity]),
                           "unreachable_frames_calibrated": int(unreachable[name][identity])}
     return TrialLengths(refined, before, evidence)
+
+
+def apply_lengths(body: BodyModel, refined: TrialLengths) -> BodyModel:
+    """A copy of the calibrated `body` with the refined lengths that changed; every other length
+    as the body has it (scale_human is given them all, so that it moves nothing else)."""
+    if not refined.changes:
+        return body
+    return scale_human(body, dict(keypoint_lengths(body), **{name: refined.lengths[name] for name in refined.changes}))
