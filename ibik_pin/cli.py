@@ -28,7 +28,7 @@ import warnings
 from typing import TYPE_CHECKING
 
 from ibik_pin.app.batch.command import add_batch_arguments
-from ibik_pin.exceptions import IbikError
+from ibik_pin.exceptions import IbikError, InputError
 from ibik_pin.solvers import SOLVERS
 
 if TYPE_CHECKING:
@@ -68,6 +68,10 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", help="URDF of the human (default: example-robot-data's)")
     parser.add_argument("--method", choices=sorted(SOLVERS), default="qp",
                         help="solver scheme (default: qp, the hierarchical QP with joint limits)")
+    parser.add_argument("--qp-solver", metavar="NAME",
+                        help="backend of --method qp's level QPs: active_set (default; the compiled primal "
+                             "active-set method), proxsuite, or a solver qpsolvers has installed (daqp, proxqp, "
+                             "...); a stack file's qp_solver key sets it too")
     parser.add_argument("--step-tolerance", type=float, metavar="RAD",
                         help="end a frame's solve early once a step moves the joints less than this "
                              "(norm of dq); report.json gives the mean steps per frame (default: always "
@@ -117,9 +121,14 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _job(arguments: argparse.Namespace) -> TrackJob:
     from ibik_pin.app.job import TrackJob
+    from ibik_pin.solvers import DEFAULT_QP_SOLVER
     from ibik_pin.tracking.settings import TrackingSettings
     from ibik_pin.tracking.stack import Stack
 
+    stack = Stack.from_toml(arguments.stack) if arguments.stack else None
+    if arguments.qp_solver is not None and stack is not None and stack.qp_solver not in (None, arguments.qp_solver):
+        raise InputError(f"--qp-solver {arguments.qp_solver} and --stack {arguments.stack}'s qp_solver = "
+                         f"{stack.qp_solver!r}: give the backend once")
     return TrackJob(
         targets=arguments.targets,
         out=arguments.out,
@@ -130,12 +139,13 @@ def _job(arguments: argparse.Namespace) -> TrackJob:
         background=arguments.background,
         cameras=None if arguments.cameras is None else [name.strip() for name in arguments.cameras.split(",")],
         model=arguments.model,
-        settings=TrackingSettings(method=arguments.method, iterations=arguments.iterations,
+        settings=TrackingSettings(method=arguments.method, qp_solver=arguments.qp_solver or DEFAULT_QP_SOLVER,
+                                  iterations=arguments.iterations,
                                   step_tolerance=arguments.step_tolerance, image_stop=arguments.image_stop,
                                   use_image=not arguments.no_image, mask_filter_radius=arguments.mask_filter,
                                   criterion=arguments.criterion, swivel_search=arguments.swivel_search,
                                   image_moves=arguments.image_moves, read_ahead=arguments.read_ahead,
-                                  stack=Stack.from_toml(arguments.stack) if arguments.stack else None),
+                                  stack=stack),
         overlay=arguments.overlay,
         quiet=arguments.quiet,
         trc_axes=arguments.trc_axes,

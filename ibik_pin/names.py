@@ -51,5 +51,5 @@ def unknown_names_message(unknown: Iterable[str], known: Sequence[str]) -> str:
     parts = []
     for name in unknown:
         reason = why_unknown(name, known)
-        parts.append(f"{name!r} ({reason})" if reason else repr(name))
+        parts.append(f"{name} ({reason})" if reason else name)
     return ", ".join(parts)

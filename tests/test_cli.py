@@ -22,7 +22,7 @@ from ibik_pin.io.mot import read_mot
 from ibik_pin.io.trc import read_trc, write_trc
 
 OUTPUTS = ["joints.trc", "q.csv", "motion.mot", "motion.bvh", "model.osim", "report.json"]
-OVERLAYS = ["residuals.png", "replay.html", "overlay_cam1.mp4", "overlay_cam2.mp4"]
+OVERLAYS = ["residuals.png", "angles.png", "replay.html", "overlay_cam1.mp4", "overlay_cam2.mp4"]
 
 
 @pytest.fixture(scope="module")
@@ -128,6 +128,46 @@ def test_the_image_stop_is_taken_from_the_command_line_and_reported(dataset, run
     assert counted["image_stop"] == "count" and counted["mean_iterations_per_frame"] == 15
 
 
+def test_angles_png_draws_the_motion_mot_columns_it_names(runs):
+    """angles.png is written with every --overlay run, from motion.mot's flexion columns."""
+    from ibik_pin.io.mot import read_mot
+    from ibik_pin.viz import plots
+
+    folder, _ = runs
+    png = (folder / "ibik" / "angles.png").read_bytes()
+    assert png.startswith(b"\x89PNG") and len(png) > 10_000
+    motion = read_mot(folder / "ibik" / "motion.mot")
+    columns = dict(zip(motion.column_names, motion.values.T, strict=True))
+    drawn = plots.joint_angle_panels(columns)
+    assert [panel.title for panel in drawn] == [title for title, _, _ in plots.JOINT_ANGLES]
+    for panel, (_, left, right) in zip(drawn, plots.JOINT_ANGLES, strict=True):
+        np.testing.assert_array_equal(panel.series["left"], columns[left])
+        np.testing.assert_array_equal(panel.series["right"], columns[right])
+    # The knee bends in walking: its curve is an angle in degrees, not radians or a constant.
+    assert 20.0 < np.ptp(columns["left_knee_Z"]) < 90.0
+
+
+def test_the_qp_backend_is_chosen_on_the_command_line_and_reported(dataset, tmp_path):
+    out = tmp_path / "out"
+    assert main(track_arguments(dataset, out, "--no-image", "--qp-solver", "proxsuite", "--iterations", "3")) == 0
+    assert json.loads((out / "report.json").read_text())["qp_solver"] == "proxsuite"
+
+
+def test_an_unknown_qp_backend_is_refused_with_the_installed_ones(dataset, tmp_path, capsys):
+    error = run_bad(track_arguments(dataset, tmp_path / "out", "--qp-solver", "gurobi"), capsys)
+    assert "--qp-solver: expected one of active_set, proxsuite" in error and "'gurobi'" in error
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_qp_backend_given_twice_differently_is_refused(dataset, tmp_path, capsys):
+    stack = tmp_path / "stack.toml"
+    stack.write_text('qp_solver = "proxsuite"\n\n[[level]]\nname = "targets"\n[[level.tasks]]\nkind = "position"\n'
+                     'keypoints = "present"\n')
+    error = run_bad(track_arguments(dataset, tmp_path / "out", "--qp-solver", "active_set", "--stack", str(stack)),
+                    capsys)
+    assert "--qp-solver active_set and --stack" in error and "'proxsuite': give the backend once" in error
+
+
 def test_the_overlay_video_decodes_to_one_frame_per_input_frame(runs):
     folder, _ = runs
     capture = cv2.VideoCapture(str(folder / "ibik" / "overlay_cam1.mp4"))
@@ -184,6 +224,18 @@ def test_unknown_keypoint_names_say_which_are_known(dataset, tmp_path, capsys):
     error = run_bad(arguments, capsys)
     assert "unknown keypoint name(s) LeftFoot; known keypoints: Hip, LHip" in error
     assert not (tmp_path / "out").exists()
+
+
+def test_a_keypoint_name_with_a_look_alike_letter_is_explained(dataset, tmp_path, capsys):
+    targets = read_trc(dataset.targets)
+    index = targets.marker_names.index("RAnkle")
+    targets.marker_names[index] = "RAnkl\u0435"  # a Cyrillic e, which prints as the Latin one
+    path = tmp_path / "lookalike.trc"
+    write_trc(path, targets)
+    arguments = track_arguments(dataset, tmp_path / "out")
+    arguments[arguments.index("--targets") + 1] = str(path)
+    error = run_bad(arguments, capsys)
+    assert "character 6 is '\u0435' (CYRILLIC SMALL LETTER IE, U+0435), not 'e' (LATIN SMALL LETTER E" in error
 
 
 def test_a_frame_count_that_differs_from_the_masks_is_refused(dataset, tmp_path, capsys):

@@ -29,4 +29,4 @@ def test_decomposed_accents_and_surrounding_spaces_normalise_to_the_composed_nam
 
 def test_the_message_lists_every_unknown_name_with_its_reason_where_there_is_one():
     assert unknown_names_message(["rknee", "Zygote"], KNOWN) == (
-        "'rknee' ('rknee' differs from 'RKnee' in case only), 'Zygote'")
+        "rknee ('rknee' differs from 'RKnee' in case only), Zygote")

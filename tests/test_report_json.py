@@ -127,3 +127,15 @@ def test_report_json_names_the_unit_of_every_figure_and_a_0_1_overlap(report):
     assert written["inside_fraction_per_view"] == {"cam1": [1.0, 0.75, None]}
     assert written["solve_seconds"] == 0.5
     assert written["frame_numbers"] == [1, 2, 3] and written["joint_limit_hits"] == {"2": ["right_elbow_Z"]}
+
+
+def test_every_key_of_report_json_has_a_unit_or_a_definition(report):
+    """Top-level keys and the keys of the records inside (trc_axes, solver_levels) each have their
+    entry in "units", under their own name or as "record.key"."""
+    written = json.loads(report.to_json(), parse_constant=refuse_constant)
+    units = written["units"]
+    undefined = [key for key in written if key not in units and key != "units"]
+    for record in ("trc_axes", "solver_levels"):
+        undefined += [f"{record}.{key}" for key in written[record] if f"{record}.{key}" not in units]
+    assert undefined == []
+    assert all(status in units["solver_levels.status_per_frame"] for status in ("solved", "relaxed", "failed"))

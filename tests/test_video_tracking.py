@@ -23,6 +23,7 @@ from ibik_pin.io.trc import read_trc
 from ibik_pin.io.video import read_frames
 from ibik_pin.vision.camera import cameras_in_frame
 from ibik_pin.vision.learned_pose import MEDIAPIPE_INSTALL, detect_pose_in_frames, learned_pose_available
+from tests.opensim_ik import opensim_ik_rms_deg, worst_beyond_tolerance
 from tests.paths import TEST_DATA
 
 VIDEOS = TEST_DATA / "pose2sim_video"
@@ -102,6 +103,16 @@ def test_learned_silhouettes_hold_the_subject_and_nobody_else(cameras, reference
 
 
 @needs_mediapipe
+def test_opensim_ik_on_joints_trc_of_a_from_video_run_finds_motion_mot(tracked, tmp_path):
+    """The triangulated Hip is the hip midpoint: the pelvis' keypoints are collinear, and its virtual
+    markers hold its roll."""
+    code, out = tracked
+    assert code == 0
+    rms = opensim_ik_rms_deg(out, tmp_path)
+    assert worst_beyond_tolerance(rms) == []
+    assert len(rms) == 44 and max(rms.values()) > 0.0  # every coordinate compared, from a real fit
+
+
 def test_track_without_targets_triangulates_them_and_reports_the_silhouettes(tracked, reference):
     code, out = tracked
     assert code == 0
@@ -117,6 +128,8 @@ def test_track_without_targets_triangulates_them_and_reports_the_silhouettes(tra
     report = json.loads((out / "report.json").read_text())
     assert report["image"] is True
     assert report["triangulation"]["file"] == "triangulated.trc"
+    # Triangulated in the model's Y-up frame: said so, not "forced" (no --trc-axes was given).
+    assert (report["trc_axes"]["used"], report["trc_axes"]["how"]) == ("y-up", "triangulated")
     # Each camera's disagreement with the others is measured; without --refit-cameras none is turned.
     extrinsics = report["extrinsics"]
     assert extrinsics["refitted"] == [] and not (out / "calibration_refitted.toml").exists()

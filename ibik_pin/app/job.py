@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from ibik_pin.app.axes import TRC_AXES
-from ibik_pin.exceptions import InputError
+from ibik_pin.exceptions import InputError, UnknownNameError
+from ibik_pin.solvers import available_qp_solvers
 from ibik_pin.tracking.settings import TrackingSettings
 
 # Where the silhouettes of --videos come from (app.video_inputs.resolve_segmenter).
@@ -31,6 +32,9 @@ def check_run_bounds(settings: TrackingSettings) -> None:
                                      ("--mask-filter", settings.mask_filter_radius, 0, MAX_MASK_FILTER_RADIUS)):
         if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
             raise InputError(f"{option}: expected a whole number from {low} to {high}, found {value!r}")
+    if settings.qp_solver not in available_qp_solvers():
+        raise UnknownNameError(f"--qp-solver: expected one of {', '.join(available_qp_solvers())} (the ones "
+                               f"installed here), found {settings.qp_solver!r}")
     tolerance = settings.step_tolerance
     if tolerance is not None and not (isinstance(tolerance, (int, float)) and np.isfinite(tolerance) and tolerance > 0):
         raise InputError(f"--step-tolerance: expected a positive number of radians, found {tolerance!r}")

@@ -15,7 +15,8 @@ from ibik_pin.app.silhouette_files import Silhouettes, camera_folder_entries, fi
 from ibik_pin.configuration import Configuration
 from ibik_pin.human import with_hip_at_hip_joints_midpoint
 from ibik_pin.io.export import write_model_bvh, write_model_mot, write_q_csv
-from ibik_pin.io.osim import write_osim_model
+from ibik_pin.io.mot import read_mot
+from ibik_pin.io.osim import virtual_marker_positions, virtual_markers, write_osim_model
 from ibik_pin.io.trc import METRES_PER_UNIT, TrcData, write_trc
 from ibik_pin.io.video import VideoReader
 from ibik_pin.model import BodyModel
@@ -23,7 +24,7 @@ from ibik_pin.tracking.result import TrackingResult
 from ibik_pin.tracking.settings import TrackingSettings
 from ibik_pin.vision.extrinsics_refit import ExtrinsicsRefit
 from ibik_pin.viz.overlay import write_overlay_video
-from ibik_pin.viz.plots import Panel, plot_panels
+from ibik_pin.viz.plots import Panel, joint_angle_panels, plot_panels
 from ibik_pin.viz.replay import write_html_replay
 
 # The keypoints joints.trc always holds (estimated ones included), then any other of the model's.
@@ -53,8 +54,14 @@ def write_outputs(folder: Path, job: TrackJob, settings: TrackingSettings, name:
     keypoints = OUTPUT_KEYPOINTS + [n for n in result.keypoint_names if n not in OUTPUT_KEYPOINTS]
     indices = [result.keypoint_names.index(n) for n in keypoints]
     scale = 1.0 / METRES_PER_UNIT[trc.units]
+    # The keypoints, then the virtual markers model.osim carries where they leave a body free to turn,
+    # so that OpenSim's inverse kinematics on joints.trc finds motion.mot again.
+    virtual = virtual_markers(body)
+    positions = np.concatenate([result.keypoints[:, indices], virtual_marker_positions(body, virtual, result.q)],
+                               axis=1)
     write_trc(folder / "joints.trc", TrcData(
-        marker_names=keypoints, times=times, positions=axes.to_trc(result.keypoints[:, indices]) * scale,
+        marker_names=keypoints + [marker.name for marker in virtual], times=times,
+        positions=axes.to_trc(positions) * scale,
         units=trc.units, data_rate=frame_rate, frame_numbers=trc.frame_numbers,
     ))
     write_q_csv(folder / "q.csv", body.model, times, result.q)
@@ -76,7 +83,8 @@ def write_overlays(folder: Path, videos: Path | None, name: str, body: BodyModel
                    silhouettes: Silhouettes | None, result: TrackingResult, trc: TrcData,
                    frame_rate: float) -> None:
     """Per camera an MP4 of the projected skeleton (over its frame of `videos`, the --videos folder,
-    if given), a residual plot and an HTML 3D replay titled with `name`."""
+    if given), a residual plot, the joint angles of motion.mot (angles.png; written before) and an
+    HTML 3D replay titled with `name`."""
     times = np.asarray(trc.times, dtype=float)
     residuals = {"mean of the targets": result.target_residuals * 1000.0}
     residuals |= {name: result.target_distances[:, index] * 1000.0 for index, name in enumerate(result.target_names)}
@@ -87,6 +95,12 @@ def write_overlays(folder: Path, videos: Path | None, name: str, body: BodyModel
         panels.append(Panel(inside, "inside the silhouette [0-1]", "fraction of the skeleton inside each view's "
                             "silhouette", ylim=(0.0, 1.02)))
     plot_panels(folder / "residuals.png", times, panels)
+    # Read back from motion.mot, so that each curve is the column its panel names.
+    motion = read_mot(folder / "motion.mot")
+    degrees = motion.values if motion.in_degrees else np.degrees(motion.values)
+    angle_panels = joint_angle_panels(dict(zip(motion.column_names, degrees.T, strict=True)))
+    if angle_panels:  # none for a --model without the human's joints
+        plot_panels(folder / "angles.png", motion.times, angle_panels)
     segment_indices = [(result.keypoint_names.index(a), result.keypoint_names.index(b))
                        for a, b in body.segments]
     write_html_replay(folder / "replay.html", result.keypoint_names, segment_indices,

@@ -64,7 +64,8 @@ class TrcAxesReport:
 
     Attributes:
         used: "y-up" or "z-up".
-        how: "detected", "forced" (--trc-axes) or "default" (no calibration to detect against).
+        how: "detected", "forced" (--trc-axes), "default" (no calibration to detect against) or
+            "triangulated" (the targets were triangulated from --videos in the model's Y-up frame).
         decided_by: when detected, what told the conventions apart: "silhouettes", "images" or
             "upright body".
         description: the convention in words, and which outputs it applies to.
@@ -178,6 +179,7 @@ class TrackingReport:
         frame_rate_hz: the TRC's data rate [Hz].
         times_s: (F,) the TRC's times [s].
         method: solver scheme.
+        qp_solver: the level QP's backend with the "qp" scheme; None with the others.
         image: whether the image criterion was used.
         criterion: the image criterion ("paper" or "two-way").
         iterations_per_frame: solver steps per frame after the first.
@@ -223,6 +225,7 @@ class TrackingReport:
     frame_rate_hz: float
     times_s: list[float]
     method: str
+    qp_solver: str | None
     image: bool
     criterion: str
     iterations_per_frame: int
@@ -286,6 +289,7 @@ class TrackingReport:
             frame_rate_hz=float(frame_rate_hz),
             times_s=[float(time) for time in times_s],
             method=settings.method,
+            qp_solver=settings.qp_solver if settings.method == "qp" else None,
             image=bool(settings.use_image and camera_names),
             criterion=settings.criterion,
             iterations_per_frame=settings.iterations,

@@ -3,6 +3,8 @@ how its frames are numbered (ibik_pin.app.report writes both)."""
 
 from __future__ import annotations
 
+from ibik_pin.solvers import LevelStatus
+
 __all__ = ["FRAME_NUMBERING", "UNITS"]
 
 FRAME_NUMBERING = (
@@ -48,4 +50,37 @@ UNITS = {
     "extrinsics.reprojection_px": ("px: per camera, median distance from its detections to the landmarks the other "
                                    "views triangulate, projected, as calibrated; reprojection_after_px: re-fitted"),
     "extrinsics.turn_deg": "deg: how far each re-fitted camera turned about its centre",
+    "frames": "the number of frames tracked (rows of the targets TRC)",
+    "frame_numbering": "how the frames of this report are numbered",
+    "image": "true when the image criterion was used (false: the blind baseline, or no view)",
+    "criterion": "the image criterion: paper (the overlap of eq. 5-6) or two-way (with the medial axis term)",
+    "cameras": "the cameras whose images were used, in the order of the per-view lists",
+    "frames_with_dropped_targets": "per TRC frame, the targets absent from it (missing, or dropped as outliers)",
+    "frames_with_disabled_views": "per TRC frame, the cameras whose silhouette was empty (their view left out)",
+    "frames_with_outlier_targets": "per TRC frame, the targets dropped because they lay metres from the body",
+    "trc_axes": "the axis convention the TRC files were read and written in, and the evidence",
+    "trc_axes.used": "y-up (Pose2Sim, OpenSim) or z-up (the calibration's world)",
+    "trc_axes.how": ("detected (against the cameras), forced (--trc-axes), default (no calibration: y-up) or "
+                     "triangulated (the targets were triangulated from --videos, in the model's Y-up frame)"),
+    "trc_axes.decided_by": "when detected, what told the conventions apart: silhouettes, images or upright body",
+    "trc_axes.description": "the convention in words, and which outputs are written in it",
+    "trc_axes.sampled_frames": "the TRC frame numbers the evidence was measured on",
+    "solver_levels": "per level of the priority stack, what it got at each frame (solver_levels.* entries)",
+    "solver_levels.stack": "where the stack came from: default, or the stack file",
+    "solver_levels.levels": "the stack's levels, highest priority first",
+    "method": "the solver scheme: qp, stack, liegeois or ik",
+    "qp_solver": "the backend that solved the qp scheme's level QPs (null for the other schemes)",
+    "joint_limit_hits": "per TRC frame, the joints (Pinocchio joint names) at a position limit at the solution",
+    "solver_levels.status_per_frame": "per level, the solver's status at each frame's last step: " + "; ".join(
+        f"{status.value}: {status.definition}" for status in LevelStatus),
+    "solver_levels.frames_per_status": "per level, the count of frames that ended in each status",
+    "solver_levels.residual_per_frame": ("per level, sqrt(sum of w |e|^2) over its least-squares tasks at each "
+                                         "frame's solution: m for position and centre-of-mass tasks, rad for "
+                                         "posture; null for the image level"),
+    "solver_levels.sacrificed_per_frame": ("per level, the part of its residual the levels above keep it from "
+                                           "removing (its residual's unit); for the image level, the share 0-1 of "
+                                           "its gradient they take"),
+    "solver_levels.criterion_per_frame": "px: per image level, the criterion h(q) at each frame's solution",
+    "solver_levels.mean_residual": "the mean of residual_per_frame, in its unit",
+    "solver_levels.mean_sacrificed": "the mean of sacrificed_per_frame, in its unit",
 }

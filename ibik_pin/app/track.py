@@ -36,6 +36,7 @@ from ibik_pin.human import FOOT_KEYPOINTS, load_human
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, read_calibration
 from ibik_pin.io.trc import METRES_PER_UNIT, TrcData, read_trc
 from ibik_pin.model import BodyModel
+from ibik_pin.names import unknown_names_message
 from ibik_pin.subject.calibration import calibrate_subject, check_subject_size
 from ibik_pin.subject.scaling import (
     scale_from_stature,
@@ -65,8 +66,8 @@ def _check_names(path: Path | None, names: Sequence[str], body: BodyModel) -> No
     unknown = [name for name in names if name not in body.keypoints]
     if unknown:
         raise InputError(
-            f"{path}: unknown keypoint name(s) {', '.join(unknown)}; known keypoints: "
-            + ", ".join(body.keypoints)
+            f"{path}: unknown keypoint name(s) {unknown_names_message(unknown, list(body.keypoints))}; "
+            "known keypoints: " + ", ".join(body.keypoints)
         )
 
 
@@ -171,6 +172,8 @@ def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
     # The cameras project model-frame points whatever the TRC's convention: only the targets turn.
     axes = choose_axes(trc_axes, names, targets_trc_m, cameras,
                        silhouettes.frame if silhouettes is not None else None)
+    if videos.targets is not None:  # y-up because ibik triangulated them so, not because the user said
+        axes = replace(axes, how="triangulated")
     if not job.quiet:
         print(f"ibik: TRC axes: {axes.describe()}", file=sys.stderr)
     targets_m = axes.to_model(targets_trc_m)

@@ -13,7 +13,9 @@ and calibrated keypoints, and its coordinate names are the .mot columns:
 - Root: a free flyer becomes the ``CustomJoint`` ``ground_pelvis`` with the coordinates
   ``pelvis_tilt, pelvis_list, pelvis_rotation`` (rotations about Z, X, Y) and ``pelvis_tx, _ty,
   _tz`` (translations in ground), exactly the root columns of motion.mot; its body is ``pelvis``.
-- Markers: one per keypoint, on the body of its frame's joint, at the frame's position [m].
+- Markers: one per keypoint, on the body of its frame's joint, at the frame's position [m]; then
+  the virtual markers (`virtual_markers`) that the keypoints leave a body's pose undetermined
+  without, so that OpenSim's inverse kinematics on joints.trc finds motion.mot again.
 - Coordinates: range from the URDF joint limits, not clamped (a motion that crosses a limit still
   plays), default 0.
 
@@ -38,7 +40,8 @@ from ibik_pin.io.files import write_text_atomically
 from ibik_pin.io.skeleton import joint_group_name
 from ibik_pin.model import BodyModel
 
-__all__ = ["OSIM_VERSION", "OsimBody", "osim_bodies", "write_osim_model"]
+__all__ = ["OSIM_VERSION", "OsimBody", "VirtualMarker", "osim_bodies", "virtual_marker_positions", "virtual_markers",
+           "write_osim_model"]
 
 #: The OpenSimDocument version written: OpenSim 4.0's format, which every 4.x release reads.
 OSIM_VERSION = "40000"
@@ -55,6 +58,12 @@ _UNALIGNED = {"JointModelRevoluteUnaligned", "JointModelRevoluteUnboundedUnalign
 _TOLERANCE = 1e-9
 # A CustomJoint's SpatialTransform holds three rotations.
 _MAX_ROTATIONS = 3
+# Virtual markers sit this far from their body's origin along its frame's X and Z axes [m]: a
+# limb's width, so that they stay near the body, far enough for a well-conditioned fit.
+VIRTUAL_MARKER_OFFSET_M = 0.1
+# A rotation that moves a body's keypoints less than this per radian is left to virtual markers
+# [m/rad]: OpenSim's fit of it would rest on millimetres of lever.
+MIN_LEVER_M = 0.02
 
 
 @dataclass(frozen=True)
@@ -127,6 +136,92 @@ def osim_bodies(body: BodyModel) -> list[OsimBody]:
     return [OsimBody(name, tuple(ids), parent) for name, ids, parent in zip(names, members, parents, strict=True)]
 
 
+@dataclass(frozen=True)
+class VirtualMarker:
+    """A marker fixed to a body where no keypoint determines its pose.
+
+    Attributes:
+        name: ``<body>_axis_x`` or ``<body>_axis_z``: VIRTUAL_MARKER_OFFSET_M along that axis of the
+            OpenSim body's frame; not an anatomical landmark.
+        joint_id: The Pinocchio joint whose frame is the body's frame.
+        location: (3,) position in that frame [m].
+    """
+
+    name: str
+    joint_id: int
+    location: np.ndarray
+
+
+def _smallest_lever_m(axes: list[np.ndarray], origin: np.ndarray, points: list[np.ndarray]) -> float:
+    """The smallest singular value of the points' velocities under unit rotations about the axes
+    through the origin (columns axis x (p - origin)): how far [m] the least visible of those
+    rotations moves the points per radian; 0 when one moves none."""
+    if not points:
+        return 0.0
+    columns = [np.concatenate([np.cross(axis, point - origin) for point in points]) for axis in axes]
+    return float(np.linalg.svd(np.stack(columns, axis=1), compute_uv=False)[-1])
+
+
+def virtual_markers(body: BodyModel) -> list[VirtualMarker]:
+    """Virtual markers for every body that its keypoints leave free to turn.
+
+    OpenSim's inverse kinematics needs each body's rotations to move some marker: joint-centre
+    keypoints leave a thigh free to turn about its hip-knee line, a pelvis known by its hip centres
+    and their midpoint free to roll about them, a trunk segment without a keypoint free altogether.
+    A body whose fixed keypoints (those on it, and those at its children's origins, which move with
+    it) move less than MIN_LEVER_M per radian under one of its rotations (at the neutral pose) gets
+    two virtual markers, along its frame's X and Z axes.
+    """
+    model = body.model
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, pin.neutral(model))
+    bodies = osim_bodies(body)
+    body_of_joint = {joint_id: index for index, item in enumerate(bodies) for joint_id in item.joint_ids}
+    fixed: list[list[np.ndarray]] = [[] for _ in bodies]
+    for frame_name in body.keypoints.values():
+        frame_id = model.getFrameId(frame_name)
+        joint_id = int(model.frames[frame_id].parentJoint)
+        if joint_id == 0:
+            continue
+        point = data.oMf[frame_id].translation.copy()
+        index = body_of_joint[joint_id]
+        fixed[index].append(point)
+        # At its body's origin (every joint of a merged group has it), the keypoint is also fixed
+        # on the parent body: a child's origin moves with its parent.
+        at_origin = np.linalg.norm(model.frames[frame_id].placement.translation) < _TOLERANCE
+        if at_origin and bodies[index].parent >= 0:
+            fixed[bodies[index].parent].append(point)
+    chosen: list[VirtualMarker] = []
+    for index, item in enumerate(bodies):
+        first = item.joint_ids[0]
+        origin = data.oMi[first].translation
+        if model.joints[first].shortname() == "JointModelFreeFlyer":
+            # It translates too: a rotation about any axis, the points' mean moved back, is free.
+            axes = list(data.oMi[first].rotation.T)
+            origin = np.mean(fixed[index], axis=0) if fixed[index] else origin
+        else:
+            axes = [data.oMi[joint_id].rotation @ _axis(model, joint_id) for joint_id in item.joint_ids]
+        if _smallest_lever_m(axes, origin, fixed[index]) >= MIN_LEVER_M:
+            continue
+        for axis_name, axis in (("x", (1.0, 0.0, 0.0)), ("z", (0.0, 0.0, 1.0))):
+            chosen.append(VirtualMarker(f"{item.name}_axis_{axis_name}", item.joint_ids[-1],
+                                        VIRTUAL_MARKER_OFFSET_M * np.array(axis)))
+    return chosen
+
+
+def virtual_marker_positions(body: BodyModel, markers: Sequence[VirtualMarker],
+                             configurations: np.ndarray) -> np.ndarray:
+    """The markers' world positions (F, V, 3) [m] at configurations (F, nq)."""
+    model = body.model
+    data = model.createData()
+    positions = np.empty((len(configurations), len(markers), 3))
+    for frame, q in enumerate(np.asarray(configurations, dtype=float)):
+        pin.forwardKinematics(model, data, q)
+        for index, marker in enumerate(markers):
+            positions[frame, index] = data.oMi[marker.joint_id].act(marker.location)
+    return positions
+
+
 def write_osim_model(path: str | os.PathLike[str], body: BodyModel, name: str = "ibik_pin_subject") -> None:
     """Write the body as an OpenSim 4.x model (.osim), atomically.
 
@@ -167,13 +262,20 @@ def write_osim_model(path: str | os.PathLike[str], body: BodyModel, name: str = 
             # On a merged joint, a keypoint sits at the group's shared origin (osim_bodies saw to it).
             location = frame.placement.translation if joint_id == osim_body.joint_ids[-1] else np.zeros(3)
             socket = f"/bodyset/{osim_body.name}"
-        marker = ElementTree.SubElement(marker_objects, "Marker", name=keypoint)
-        _text(marker, "socket_parent_frame", socket)
-        _text(marker, "location", _vector(location))
-        _text(marker, "fixed", "false")
+        _write_marker(marker_objects, keypoint, socket, location)
+    for virtual in virtual_markers(body):
+        _write_marker(marker_objects, virtual.name, f"/bodyset/{bodies[body_of_joint[virtual.joint_id]].name}",
+                      virtual.location)
     ElementTree.indent(document, space="  ")
     text = '<?xml version="1.0" encoding="UTF-8" ?>\n' + ElementTree.tostring(document, encoding="unicode") + "\n"
     write_text_atomically(path, text)
+
+
+def _write_marker(objects: ElementTree.Element, name: str, socket: str, location: np.ndarray) -> None:
+    marker = ElementTree.SubElement(objects, "Marker", name=name)
+    _text(marker, "socket_parent_frame", socket)
+    _text(marker, "location", _vector(location))
+    _text(marker, "fixed", "false")
 
 
 def _text(parent: ElementTree.Element, tag: str, text: str) -> ElementTree.Element:

@@ -56,15 +56,11 @@ def joint_angle_panels(columns_deg: dict[str, np.ndarray]) -> list[Panel]:
     Args:
         columns_deg: column name -> values (F,) [deg], as motion.mot holds them.
 
-    Raises:
-        InputError: none of the columns is present (not this model's motion).
+    Returns:
+        The panels, none for a motion without these columns (another model's).
     """
-    panels = [Panel({"left": columns_deg[left], "right": columns_deg[right]}, f"{title} [deg]", title)
-              for title, left, right in JOINT_ANGLES if left in columns_deg and right in columns_deg]
-    if not panels:
-        raise InputError(f"columns_deg: expected the joint angle columns {JOINT_ANGLES[0][1]}, ..., found "
-                         f"{', '.join(list(columns_deg)[:6])}")
-    return panels
+    return [Panel({"left": columns_deg[left], "right": columns_deg[right]}, f"{title} [deg]", title)
+            for title, left, right in JOINT_ANGLES if left in columns_deg and right in columns_deg]
 
 
 def _side_and_part(label: str) -> tuple[str | None, str]:
