@@ -75,6 +75,8 @@ def main(argv: list[str] | None = None) -> dict:
                         help="limb lengths: the static's; refined on the trial's targets (reach) or on its "
                              "targets and silhouettes (images; sweepkit/lengths.py); the trial's true ones "
                              "(oracle, a diagnostic)")
+    parser.add_argument("--reach-smoothing", type=int, default=1, metavar="FRAMES",
+                        help="frames the targets' reach is averaged over before its bound (trial_lengths)")
     parser.add_argument("--keep", type=Path, default=None,
                         help="keep each condition's files under this folder, and reuse those already there")
     parser.add_argument("--quick", action="store_true", help="2 conditions of 12 frames, IBIK 2 views (a smoke test)")
@@ -120,7 +122,7 @@ def main(argv: list[str] | None = None) -> dict:
                                          tuple(silhouettes))
             static, refinement = None, {}
             if arguments.lengths in ("reach", "images"):  # PIK's lengths: the targets' only
-                static, refinement["pik"] = reach_static(inputs)
+                static, refinement["pik"] = reach_static(inputs, arguments.reach_smoothing)
             elif arguments.lengths == "oracle":
                 static, refinement["pik"] = oracle_static(inputs)
             conditions.append(dict(inputs.condition.row(), lengths=refinement))
@@ -133,7 +135,8 @@ def main(argv: list[str] | None = None) -> dict:
                 run_static = static
                 if arguments.lengths == "images" and name != "pik":
                     run_static, refinement[f"{name}/{kind}"] = image_static(
-                        inputs, first_pass, int(name[4:-1]), kind, tracking_settings(variant(name), kind, overrides))
+                        inputs, first_pass, int(name[4:-1]), kind, tracking_settings(variant(name), kind, overrides),
+                        arguments.reach_smoothing)
                 result = run_condition_variant(inputs, name, kind, overrides, run_static)
                 first_pass = result.estimate if name == "pik" else first_pass
                 run = result.row()

@@ -66,6 +66,18 @@ def test_the_reach_bound_is_a_high_quantile_of_the_end_to_end_distance():
     assert "right_leg" not in bounds
 
 
+def test_smoothing_the_reach_keeps_noise_from_inflating_the_bound():
+    legs = _leg(200, np.full(200, 10.0))
+    true_reach = np.linalg.norm(legs[:, 2] - legs[:, 0], axis=1).max()
+    noisy = legs + np.random.default_rng(1).normal(0.0, 0.01, legs.shape)
+    raw = reach_bounds(NAMES, noisy)["left_leg"]
+    smoothed = reach_bounds(NAMES, noisy, smoothing_frames=5)["left_leg"]
+    assert raw > true_reach + 0.01
+    assert smoothed < raw - 0.005
+    with pytest.raises(InputError, match="smoothing_frames"):
+        reach_bounds(NAMES, noisy, smoothing_frames=0)
+
+
 def test_the_reach_lengthens_a_limb_too_short_for_its_targets_and_never_shortens_one():
     legs = _leg(50, np.full(50, 3.0))
     short = refine_from_reach({"left_thigh": 0.95 * THIGH, "left_shank": 0.95 * SHANK}, NAMES, legs, slack=0.0)

@@ -59,11 +59,11 @@ def static_lengths(inputs: ConditionInputs) -> dict[str, float]:
     return segment_lengths_from_keypoints(static.marker_names, static.positions)
 
 
-def reach_static(inputs: ConditionInputs) -> tuple[Path, dict]:
+def reach_static(inputs: ConditionInputs, smoothing_frames: int = 1) -> tuple[Path, dict]:
     """The static with every limb lengthened as far as the trial's targets need."""
     lengths = static_lengths(inputs)
     targets = read_trc(inputs.targets).in_metres()
-    refined = refine_from_reach(lengths, targets.marker_names, targets.positions)
+    refined = refine_from_reach(lengths, targets.marker_names, targets.positions, smoothing_frames=smoothing_frames)
     return _write_static(inputs, lengths, refined.lengths, "reach"), _report(lengths, refined.lengths)
 
 
@@ -75,7 +75,7 @@ def oracle_static(inputs: ConditionInputs) -> tuple[Path, dict]:
 
 
 def image_static(inputs: ConditionInputs, estimate: TrcData, views: int, silhouettes: str,
-                 settings: TrackingSettings | None = None) -> tuple[Path, dict]:
+                 settings: TrackingSettings | None = None, smoothing_frames: int = 1) -> tuple[Path, dict]:
     """The static with the legs' lengths the first `views` cameras' silhouettes prefer around the
     pose `estimate` (a PIK run's joints.trc), the arms' by reach."""
     settings = settings or TrackingSettings()
@@ -104,7 +104,8 @@ def image_static(inputs: ConditionInputs, estimate: TrcData, views: int, silhoue
             yield keypoints, [(image_task, 1.0), (axis_task, settings.axis_weight)]
 
     legs = refine_from_images(body, model_lengths, frames(), limbs=("left_leg", "right_leg"), keep_ratio=True)
-    arms = refine_from_reach(model_lengths, targets.marker_names, targets.positions, limbs=("left_arm", "right_arm"))
+    arms = refine_from_reach(model_lengths, targets.marker_names, targets.positions, limbs=("left_arm", "right_arm"),
+                             smoothing_frames=smoothing_frames)
     lengths = static_lengths(inputs)
     wanted = dict(lengths)
     for name in SEGMENT_CHILDREN:
