@@ -27,7 +27,6 @@ import dataclasses
 import json
 import platform
 import shutil
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -37,6 +36,7 @@ from realdata.inputs import CONDITIONS, prepare_inputs
 from realdata.runner import (
     DEFAULT_DATA,
     REPOSITORY,
+    code_revision,
     markdown,
     parse_settings,
     run_variant,
@@ -66,18 +66,6 @@ def _clip_names(text: str) -> list[str]:
             raise SystemExit(f"real_mocap: error: --clips: unknown clip {item!r}; known: {', '.join(CLIPS)}, "
                              "walking, boxing, all")
     return list(dict.fromkeys(names))
-
-
-def _revision() -> str:
-    """The repository's commit, with "+ local changes" when the library's files differ from it."""
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPOSITORY, capture_output=True,
-                                text=True, check=True).stdout.strip()
-        changed = subprocess.run(["git", "status", "--porcelain", "--", "ibik_pin"], cwd=REPOSITORY,
-                                 capture_output=True, text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
-    return commit + (" + local changes to ibik_pin" if changed else "")
 
 
 def main() -> None:
@@ -128,7 +116,7 @@ def main() -> None:
         if not arguments.quiet:
             print(text, flush=True)
 
-    revision = _revision()  # the code this process loads now
+    revision = code_revision()  # the code this process loads now
     started = time.perf_counter()
     results = []
     total = len(clips) * len(conditions) * len(variants)

@@ -25,13 +25,12 @@ import argparse
 import json
 import platform
 import shutil
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-from realdata.runner import DEFAULT_DATA, REPOSITORY, parse_settings, tracking_settings, variant
+from realdata.runner import DEFAULT_DATA, REPOSITORY, code_revision, parse_settings, tracking_settings, variant
 from sweepkit.conditions import draw_condition, load_condition, write_condition
 from sweepkit.lengths import LENGTHS, image_static, oracle_static, reach_static
 from sweepkit.runs import markdown, run_condition_variant, summarize
@@ -42,17 +41,6 @@ QUICK = {"conditions": 2, "frames": 12, "rate": 30.0, "views": "2", "silhouettes
 
 def _list(text: str) -> list[str]:
     return [item.strip() for item in text.split(",") if item.strip()]
-
-
-def _revision() -> str:
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPOSITORY, capture_output=True,
-                                text=True, check=True).stdout.strip()
-        changed = subprocess.run(["git", "status", "--porcelain", "--", "ibik_pin"], cwd=REPOSITORY,
-                                 capture_output=True, text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
-    return commit + (" + local changes to ibik_pin" if changed else "")
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -159,9 +147,9 @@ def main(argv: list[str] | None = None) -> dict:
               f"noise-free mocap joints. PIK uses no image (one run stands for both silhouette columns). "
               f"Settings overridden: {overrides or 'none'}; limb lengths: {arguments.lengths}. "
               f"Wall time {wall:.0f} s on {platform.node()}; code at "
-              f"{_revision()}.")
+              f"{code_revision()}.")
     arguments.out.mkdir(parents=True, exist_ok=True)
-    result = {"command": command, "revision": _revision(), "seed": arguments.seed, "frames": arguments.frames,
+    result = {"command": command, "revision": code_revision(), "seed": arguments.seed, "frames": arguments.frames,
               "rate_hz": arguments.rate, "overrides": overrides, "lengths": arguments.lengths,
               "wall_seconds": wall, "summary": summary,
               "conditions": conditions, "runs": runs}

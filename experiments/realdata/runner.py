@@ -18,6 +18,7 @@ import ctypes
 import dataclasses
 import re
 import shutil
+import subprocess
 import tempfile
 import time
 import typing
@@ -39,6 +40,18 @@ REPOSITORY = Path(__file__).resolve().parents[2]
 DEFAULT_DATA = REPOSITORY.parent / "shared" / "data"
 DEFAULT_CACHE = REPOSITORY / "out" / "real_mocap_cache"
 JOINTS_OF_KIND = {"boxing": ("LElbow", "RElbow"), "walking": ("LKnee", "RKnee")}
+
+
+def code_revision() -> str:
+    """The repository's commit, with "+ local changes" when the library's files differ from it."""
+    try:
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPOSITORY, capture_output=True,
+                                text=True, check=True).stdout.strip()
+        changed = subprocess.run(["git", "status", "--porcelain", "--", "ibik_pin"], cwd=REPOSITORY,
+                                 capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return commit + (" + local changes to ibik_pin" if changed else "")
 
 
 def single_threaded_math() -> None:

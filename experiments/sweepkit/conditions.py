@@ -32,6 +32,7 @@ import cv2
 import numpy as np
 from paper.section4 import DEFECTS
 from realdata.clips import ESTIMATED, STATIC_SPACING_S, MocapClip, load_clip
+from realdata.inputs import ClipInputs
 
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, write_calibration
 from ibik_pin.io.trc import TrcData, write_trc
@@ -171,33 +172,22 @@ def scaled_defects(camera, clip: MocapClip, stature_m: float) -> SilhouetteDefec
 
 
 @dataclass
-class ConditionInputs:
-    """The files of one condition (folder) and the truth to judge by.
-
-    Attributes:
-        cameras: camera names, cam1 first.
-        truth_names, truth: every keypoint (F, K, 3) [m], Y up, noise-free.
-        target_names: the keypoints written as targets; frame_rate: [Hz].
+class ConditionInputs(ClipInputs):
+    """The files of one condition (realdata's ClipInputs: folder, spec, cameras cam1 first, truth
+    names and (F, K, 3) noise-free truth [m] Y up, target names) and what differs here: one targets
+    file for both silhouette conditions, masks/<silhouettes>/<camera>/, and the static file a run
+    calibrates on (None: the condition's static.trc).
     """
 
-    folder: Path
     condition: Condition
-    cameras: list[str]
-    truth_names: list[str]
-    truth: np.ndarray
-    target_names: list[str]
     frame_rate: float
-
-    @property
-    def calibration(self) -> Path:
-        return self.folder / "calibration.toml"
+    static_path: Path | None = None
 
     @property
     def static(self) -> Path:
-        return self.folder / "static.trc"
+        return self.static_path or self.folder / "static.trc"
 
-    @property
-    def targets(self) -> Path:
+    def targets(self, silhouettes: str = "clean") -> Path:
         return self.folder / "targets.trc"
 
     def masks(self, silhouettes: str) -> Path:
@@ -241,8 +231,8 @@ def write_condition(condition: Condition, data: Path, frames: int, rate: float, 
                     raise OSError(f"{path}: OpenCV cannot write this mask")
     np.savez(folder / "truth.npz", names=np.array(clip.keypoint_names), keypoints=clip.keypoints,
              targets=np.array(targets), rate=rate)
-    inputs = ConditionInputs(folder, condition, [c.name for c in cameras], list(clip.keypoint_names),
-                             clip.keypoints, targets, rate)
+    inputs = ConditionInputs(folder, spec, [c.name for c in cameras], list(clip.keypoint_names), clip.keypoints,
+                             targets, condition, rate)
     (folder / "condition.json").write_text(json.dumps(condition.row(), indent=2) + "\n")  # last: complete
     return inputs
 
@@ -259,6 +249,6 @@ def load_condition(condition: Condition, folder: Path) -> ConditionInputs | None
     if any(written[key] != drawn[key] for key in ("index", "seed", "motion", "target_noise_mm", "toes")):
         return None
     placed = dataclasses.replace(condition, cameras=tuple(CameraDraw(**camera) for camera in written["cameras"]))
-    return ConditionInputs(folder, placed, [f"cam{k}" for k in range(1, len(placed.cameras) + 1)],
+    return ConditionInputs(folder, MOTIONS[condition.motion], [f"cam{k}" for k in range(1, len(placed.cameras) + 1)],
                            [str(n) for n in truth["names"]], truth["keypoints"], [str(n) for n in truth["targets"]],
-                           float(truth["rate"]))
+                           placed, float(truth["rate"]))

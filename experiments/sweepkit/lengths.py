@@ -62,7 +62,7 @@ def static_lengths(inputs: ConditionInputs) -> dict[str, float]:
 def reach_static(inputs: ConditionInputs, smoothing_frames: int = 1) -> tuple[Path, dict]:
     """The static with every limb lengthened as far as the trial's targets need."""
     lengths = static_lengths(inputs)
-    targets = read_trc(inputs.targets).in_metres()
+    targets = read_trc(inputs.targets()).in_metres()
     refined = refine_from_reach(lengths, targets.marker_names, targets.positions, smoothing_frames=smoothing_frames)
     return _write_static(inputs, lengths, refined.lengths, "reach"), _report(lengths, refined.lengths)
 
@@ -82,7 +82,7 @@ def image_static(inputs: ConditionInputs, estimate: TrcData, views: int, silhoue
     body = calibrate_static_trial(inputs.static, load_human()).body
     model_lengths = keypoint_lengths(body)
     cameras = cameras_in_frame(read_calibration(inputs.calibration), POSE2SIM_TRC_TO_WORLD)[:views]
-    targets = read_trc(inputs.targets).in_metres()
+    targets = read_trc(inputs.targets()).in_metres()
     centre = np.nanmean(targets.positions[:, targets.marker_names.index("Hip")], axis=0)
     caps = support_caps(cameras, centre)
     scales = support_caps(cameras, centre, settings.axis_scale)

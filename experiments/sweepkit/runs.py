@@ -8,17 +8,15 @@ the median and the 90th percentile of those figures over conditions.
 
 from __future__ import annotations
 
+import dataclasses
 import shutil
 import tempfile
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from realdata.runner import single_threaded_math, tracking_settings, variant
+from realdata.runner import run_variant, variant
 
-from ibik_pin.app.job import TrackJob
-from ibik_pin.app.track import run_track
 from ibik_pin.io.trc import TrcData, read_trc
 from sweepkit.conditions import ConditionInputs
 
@@ -63,35 +61,22 @@ class SweepRun:
 
 def run_condition_variant(inputs: ConditionInputs, name: str, silhouettes: str, overrides: dict | None = None,
                           static: Path | None = None) -> SweepRun:
-    """``ibik track`` on the condition's files with the variant (IBIK: the first N cameras);
-    `static`: another static file than the condition's."""
+    """``ibik track`` on the condition's files with the variant (IBIK: the first N cameras;
+    realdata.runner.run_variant); `static`: another static file than the condition's."""
     chosen = variant(name)
-    single_threaded_math()
     scratch = Path(tempfile.mkdtemp(prefix="sweep_"))
-    job = TrackJob(
-        targets=inputs.targets, out=scratch / "run", static=static or inputs.static,
-        calibration=inputs.calibration if chosen.views else None,
-        masks=inputs.masks(silhouettes) if chosen.views else None,
-        cameras=inputs.cameras[:chosen.views] if chosen.views else None,
-        settings=tracking_settings(chosen, silhouettes, overrides), quiet=True,
-    )
-    started = time.perf_counter()
     try:
-        run_track(job)
-        wall = time.perf_counter() - started
+        result = run_variant(dataclasses.replace(inputs, static_path=static), chosen, silhouettes, overrides,
+                             scratch / "run")
         estimate = read_trc(scratch / "run" / "joints.trc").in_metres()
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
-
-    def positions(names) -> np.ndarray:
-        return estimate.positions[:, [estimate.marker_names.index(n) for n in names]]
-
-    errors = np.linalg.norm(positions(("LElbow", "RElbow", "LKnee", "RKnee")) - inputs.estimated_truth(), axis=2)
     truth = inputs.truth[:, [inputs.truth_names.index(n) for n in inputs.target_names]]
-    target_errors = np.linalg.norm(positions(inputs.target_names) - truth, axis=2)
+    estimated = estimate.positions[:, [estimate.marker_names.index(n) for n in inputs.target_names]]
     condition = inputs.condition
     return SweepRun(condition.index, condition.motion, condition.kind, chosen.name,
-                    "none" if not chosen.views else silhouettes, errors, target_errors, wall, estimate)
+                    "none" if not chosen.views else silhouettes, result.errors,
+                    np.linalg.norm(estimated - truth, axis=2), result.wall_seconds, estimate)
 
 
 def _stats(values: list[float]) -> dict:
