@@ -45,9 +45,14 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
     # Paths stay text: TrackJob checks and converts them, and an empty one must reach it as such
     # (Path("") is the current folder).
     parser.add_argument("--targets",
-                        help="OpenSim TRC of 3D keypoints (Pose2Sim names), m or mm; without it, --videos and "
+                        help="OpenSim TRC of 3D keypoints (Pose2Sim names), m or mm, or a C3D file (see "
+                             "--c3d-mapping); without it, --videos and "
                              "--calibration: the keypoints are detected in every view and triangulated")
-    parser.add_argument("--static", help="TRC of a static trial, to scale the model")
+    parser.add_argument("--static", help="TRC (or C3D) of a static trial, to scale the model")
+    parser.add_argument("--c3d-mapping", metavar="MAPPING.toml",
+                        help="for C3D --targets/--static: a [keypoints] table of keypoint = [markers], each "
+                             "keypoint the mean of its markers (default: markers named as keypoints, Vicon "
+                             "BodyBuilder's joint points or Plug-in Gait markers)")
     parser.add_argument("--calibration", help="Pose2Sim calibration TOML")
     sources = parser.add_mutually_exclusive_group()
     sources.add_argument("--masks", help="folder with one sub-folder of masks per camera")
@@ -139,6 +144,7 @@ def _job(arguments: argparse.Namespace) -> TrackJob:
         background=arguments.background,
         cameras=None if arguments.cameras is None else [name.strip() for name in arguments.cameras.split(",")],
         model=arguments.model,
+        c3d_mapping=arguments.c3d_mapping,
         settings=TrackingSettings(method=arguments.method, qp_solver=arguments.qp_solver or DEFAULT_QP_SOLVER,
                                   iterations=arguments.iterations,
                                   step_tolerance=arguments.step_tolerance, image_stop=arguments.image_stop,
@@ -175,6 +181,17 @@ def _calibrate(arguments: argparse.Namespace) -> None:
     print(f"wrote {arguments.out} and {run.figures}")
 
 
+def _convert_calibration(arguments: argparse.Namespace) -> None:
+    """`ibik convert-calibration`: read any calibration format, write Pose2Sim's TOML."""
+    from ibik_pin.io.calibration import read_calibration, write_calibration
+
+    if arguments.out.exists():
+        raise InputError(f"--out {arguments.out}: the file exists; give a new name (nothing was written)")
+    cameras = read_calibration(arguments.calibration)
+    write_calibration(arguments.out, cameras)
+    print(f"wrote {arguments.out}: {len(cameras)} cameras ({', '.join(camera.name for camera in cameras)})")
+
+
 class _OneLineParser(argparse.ArgumentParser):
     """argparse with its errors in the package's form: one line on stderr, exit code 2."""
 
@@ -196,6 +213,11 @@ def build_parser() -> argparse.ArgumentParser:
                                 help="track every trial under a folder on Dask (pip install 'ibik_pin[batch]')")
     _add_track_arguments(batch)
     add_batch_arguments(batch)
+    convert = commands.add_parser("convert-calibration",
+                                  help="write a calibration (Qualisys .qca.txt, EasyMocap intri.yml + extri.yml, "
+                                       "Anipose TOML) as Pose2Sim's calibration TOML")
+    convert.add_argument("calibration", type=Path, help="the calibration file (or EasyMocap's folder)")
+    convert.add_argument("--out", type=Path, required=True, help="the TOML to write (an existing file is refused)")
     demo = commands.add_parser("demo", help="track the bundled real motion, with and without image")
     demo.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder")
     demo.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -284,6 +306,8 @@ def _run(arguments: argparse.Namespace) -> int:
                 print("\n".join(lines[1:]))
         elif arguments.command == "calibrate":
             _calibrate(arguments)
+        elif arguments.command == "convert-calibration":
+            _convert_calibration(arguments)
         elif arguments.command == "batch":
             from ibik_pin.app.batch.command import run_batch_command
 

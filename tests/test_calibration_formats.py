@@ -106,3 +106,19 @@ def test_an_unknown_format_is_refused_naming_the_supported_ones(tmp_path):
     with pytest.raises(FileFormatError, match=r"expected valid TOML \(or one of the other formats read: Qualisys "
                                               r"\.qca\.txt, EasyMocap intri\.yml \+ extri\.yml\)"):
         read_calibration(tmp_path / "calib.txt")
+
+
+def test_convert_calibration_writes_the_qualisys_cameras_as_pose2sim_toml(tmp_path, capsys):
+    from ibik_pin.cli import main
+
+    out = tmp_path / "calib.toml"
+    assert main(["convert-calibration", str(QUALISYS), "--out", str(out)]) == 0
+    assert "wrote" in capsys.readouterr().out
+    points = _reference_points_world()
+    for converted, original in zip(read_calibration(out), read_calibration(QUALISYS), strict=True):
+        assert converted.name == original.name and converted.size == original.size
+        np.testing.assert_allclose(converted.project(points), original.project(points), atol=1e-9)
+    # An existing file is the user's: refused, left as it was.
+    before = out.read_bytes()
+    assert main(["convert-calibration", str(QUALISYS), "--out", str(out)]) == 2
+    assert "the file exists" in capsys.readouterr().err and out.read_bytes() == before

@@ -19,7 +19,7 @@ from ibik_pin.evaluation import mean_joint_errors_mm
 from ibik_pin.exceptions import IbikWarning
 from ibik_pin.io.calibration import read_calibration, write_calibration
 from ibik_pin.io.mot import read_mot
-from ibik_pin.io.trc import read_trc, write_trc
+from ibik_pin.io.trc import METRES_PER_UNIT, read_trc, write_trc
 
 OUTPUTS = ["joints.trc", "q.csv", "motion.mot", "motion.bvh", "model.osim", "report.json"]
 OVERLAYS = ["residuals.png", "angles.png", "replay.html", "overlay_cam1.mp4", "overlay_cam2.mp4"]
@@ -145,6 +145,26 @@ def test_angles_png_draws_the_motion_mot_columns_it_names(runs):
         np.testing.assert_array_equal(panel.series["right"], columns[right])
     # The knee bends in walking: its curve is an angle in degrees, not radians or a constant.
     assert 20.0 < np.ptp(columns["left_knee_Z"]) < 90.0
+
+
+def test_the_targets_as_c3d_give_the_joints_of_their_trc_within_a_millimetre(dataset, runs, tmp_path):
+    from tests.c3d_files import write_c3d
+
+    folder, _ = runs
+    trc = read_trc(dataset.targets)
+    c3d = tmp_path / "targets.c3d"
+    write_c3d(c3d, trc.marker_names, trc.positions / METRES_PER_UNIT["mm"] * METRES_PER_UNIT[trc.units],
+              trc.data_rate)
+    arguments = track_arguments(dataset, tmp_path / "out")
+    arguments[arguments.index("--targets") + 1] = str(c3d)
+    assert main(arguments) == 0
+    from_trc, from_c3d = read_trc(folder / "ibik" / "joints.trc"), read_trc(tmp_path / "out" / "joints.trc")
+    assert from_c3d.marker_names == from_trc.marker_names
+    scale = METRES_PER_UNIT[from_c3d.units] / METRES_PER_UNIT["mm"]
+    difference_mm = np.abs(from_c3d.positions * scale - from_trc.positions * METRES_PER_UNIT[from_trc.units] * 1000)
+    assert np.nanmax(difference_mm) < 1.0
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert (report["trc_axes"]["used"], report["trc_axes"]["how"]) == ("y-up", "declared by the C3D file")
 
 
 def test_the_qp_backend_is_chosen_on_the_command_line_and_reported(dataset, tmp_path):

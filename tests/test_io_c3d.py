@@ -8,6 +8,7 @@ import pytest
 from ibik_pin.exceptions import FileFormatError, UnknownNameError
 from ibik_pin.io.c3d import markers_to_keypoints, read_c3d, read_c3d_markers, read_mapping
 from ibik_pin.io.trc import TrcData, read_trc
+from tests.c3d_files import write_c3d
 
 ezc3d = pytest.importorskip("ezc3d")
 DATA = Path(__file__).parent / "data"
@@ -18,20 +19,6 @@ def _without(markers: TrcData, drop) -> TrcData:
     keep = [index for index, name in enumerate(markers.marker_names) if not drop(name)]
     return TrcData([markers.marker_names[i] for i in keep], markers.times, markers.positions[:, keep],
                    markers.units, markers.data_rate, markers.frame_numbers)
-
-
-def _write_c3d(path: Path, names, positions_mm: np.ndarray, rate: float) -> None:
-    """positions_mm (F, M, 3), NaN for gaps (written with residual -1, as Vicon writes them)."""
-    content = ezc3d.c3d()
-    content["parameters"]["POINT"]["RATE"]["value"] = [rate]
-    content["parameters"]["POINT"]["LABELS"]["value"] = tuple(names)
-    content["parameters"]["POINT"]["UNITS"]["value"] = ["mm"]
-    points = np.ones((4, len(names), positions_mm.shape[0]))
-    points[:3] = np.nan_to_num(np.transpose(positions_mm, (2, 1, 0)))
-    content["data"]["points"] = points
-    residuals = np.where(np.isnan(positions_mm).any(axis=2).T, -1.0, 0.5)[None]
-    content["data"]["meta_points"]["residuals"] = residuals
-    content.write(str(path))
 
 
 def test_cmu_vicon_joint_points_become_the_keypoints_in_the_files_units_and_rate():
@@ -69,7 +56,7 @@ def test_a_c3d_of_keypoints_reads_back_as_its_trc_with_gaps_as_nan(tmp_path):
     trc = read_trc(DATA / "pose2sim_balancing_excerpt.trc")
     positions_mm = trc.positions * 1000.0
     positions_mm[7, 3] = np.nan
-    _write_c3d(tmp_path / "targets.c3d", trc.marker_names, positions_mm, trc.data_rate)
+    write_c3d(tmp_path / "targets.c3d", trc.marker_names, positions_mm, trc.data_rate)
     read = read_c3d(tmp_path / "targets.c3d")
     assert read.marker_names == [name for name in read.marker_names if name in trc.marker_names]
     for index, name in enumerate(read.marker_names):
@@ -102,3 +89,20 @@ def test_a_file_that_is_not_c3d_or_a_bad_mapping_is_one_file_format_error(tmp_pa
     (tmp_path / "m.toml").write_text("[keypoints]\nLKnee = 3\n")
     with pytest.raises(FileFormatError, match=r"keypoints\.LKnee: expected a list of marker names, found 3"):
         read_mapping(tmp_path / "m.toml")
+
+
+def test_cmus_raw_vicon_recording_is_tracked_from_its_c3d_z_up_as_the_file_declares(tmp_path):
+    import json
+
+    from ibik_pin.cli import main
+
+    out = tmp_path / "out"
+    assert main(["track", "--targets", str(CMU_C3D), "--no-image", "--quiet", "--out", str(out)]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert (report["trc_axes"]["used"], report["trc_axes"]["how"]) == ("z-up", "declared by the C3D file")
+    # Vicon's joint points are joint centres, as the model's keypoints: met to millimetres, scaled from
+    # their own distances (heels and toes are skin markers, off the model's foot points).
+    joint_centres = ("LHip", "RHip", "LKnee", "RKnee", "LAnkle", "RAnkle", "LElbow", "RElbow", "LWrist", "RWrist")
+    worst_mm = max(1000 * report["keypoint_residual_m"][name]["mean"] for name in joint_centres)
+    assert worst_mm < 5.0
+    assert read_trc(out / "joints.trc").positions.shape[0] == 60

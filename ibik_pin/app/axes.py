@@ -87,7 +87,8 @@ class AxesChoice:
     Attributes:
         axes: "y-up" or "z-up".
         how: "detected", "forced" (--trc-axes), "default" (no calibration to detect against) or
-            "triangulated" (targets triangulated from --videos, in the model's Y-up frame).
+            "triangulated" (targets triangulated from --videos, in the model's Y-up frame) or "declared
+            by the C3D file" (its POINT:Y_SCREEN).
         decided_by: what told the conventions apart when detected: "silhouettes", "images" or
             "upright body"; empty otherwise.
         scores: each convention's score.

@@ -46,8 +46,10 @@ class TrackJob:
     the modules of the application read and never rewrite.
 
     `trc_axes` is the TRC files' axis convention: "auto" (detected against the calibration's
-    cameras; y-up without a calibration), "y-up" (Pose2Sim, OpenSim) or "z-up" (the calibration's
-    own world); see app.axes.
+    cameras; y-up without a calibration; a C3D file's own declaration, POINT:Y_SCREEN, where it has
+    one), "y-up" (Pose2Sim, OpenSim) or "z-up" (the calibration's own world); see app.axes.
+    `targets` and `static` may be C3D files (recognised by content), their markers mapped to
+    keypoints by `c3d_mapping` (a TOML mapping file; None: io.c3d's default mapping).
     """
 
     targets: Path | None
@@ -66,10 +68,12 @@ class TrackJob:
     segmenter: str = "auto"
     triangulated_limbs: bool = False
     refit_cameras: list[str] | None = None
+    c3d_mapping: Path | None = None
 
     def __post_init__(self) -> None:
         """Paths given as str become Paths; what the CLI refuses, the API refuses too (InputError)."""
-        for name in ("targets", "out", "static", "calibration", "masks", "videos", "background", "model"):
+        for name in ("targets", "out", "static", "calibration", "masks", "videos", "background", "model",
+                     "c3d_mapping"):
             value = getattr(self, name)
             if value is not None and not isinstance(value, Path):
                 if isinstance(value, str) and not value.strip():
@@ -98,4 +102,5 @@ class TrackJob:
     @property
     def inputs(self) -> list[Path | None]:
         """Every input path of the job (None for those not given)."""
-        return [self.targets, self.static, self.calibration, self.masks, self.videos, self.background, self.model]
+        return [self.targets, self.static, self.calibration, self.masks, self.videos, self.background, self.model,
+                self.c3d_mapping]

@@ -65,7 +65,8 @@ class TrcAxesReport:
     Attributes:
         used: "y-up" or "z-up".
         how: "detected", "forced" (--trc-axes), "default" (no calibration to detect against) or
-            "triangulated" (the targets were triangulated from --videos in the model's Y-up frame).
+            "triangulated" (the targets were triangulated from --videos in the model's Y-up frame) or
+            "declared by the C3D file" (its POINT:Y_SCREEN, the axis drawn upward).
         decided_by: when detected, what told the conventions apart: "silhouettes", "images" or
             "upright body".
         description: the convention in words, and which outputs it applies to.
@@ -209,6 +210,8 @@ class TrackingReport:
         inside_fraction_per_view: per camera, the fraction of the skeleton inside the silhouette
             at each frame [0-1] (None when the view was disabled).
         solve_seconds: wall time of the solves [s].
+        compile_seconds: wall time spent compiling the numeric kernels during the frame loop (a
+            first run on a machine) [s]; the frame rates leave it out.
         loop_seconds: wall time of the whole frame loop [s] (see :data:`UNITS`).
         silhouettes: how well each camera's silhouettes hold the projected targets, and their
             area over time (app.input_reports.SilhouetteQuality); None without silhouettes.
@@ -242,6 +245,7 @@ class TrackingReport:
     solver_levels: SolverLevelsReport = field(default_factory=SolverLevelsReport)
     inside_fraction_per_view: dict[str, list[float | None]] = field(default_factory=dict)
     solve_seconds: float | None = None
+    compile_seconds: float | None = None
     frames_per_second: float | None = None
     loop_seconds: float | None = None
     frames_with_outlier_targets: dict[str, list[str]] = field(default_factory=dict)
@@ -311,6 +315,7 @@ class TrackingReport:
                                       for index, name in enumerate(camera_names)
                                       if result.inside_fraction.shape == result.overlap.shape},
             solve_seconds=_finite_or_none(result.solve_seconds),
+            compile_seconds=_finite_or_none(result.compile_seconds),
             frames_per_second=_finite_or_none(result.frames_per_second),
             loop_seconds=_finite_or_none(result.loop_seconds),
             mean_iterations_per_frame=(float(np.mean(result.iterations[1:])) if len(result.iterations) > 1

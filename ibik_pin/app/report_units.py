@@ -18,12 +18,15 @@ UNITS = {
     "frame_numbers": "the TRC's Frame# (counted from 1, as the TRC counts); keys of the frame dictionaries too",
     "frame_rate_hz": "Hz: the targets TRC's DataRate",
     "times_s": "s: the targets TRC's Time column",
-    "solve_seconds": "s: wall time of the solves alone (no reading or writing)",
-    "solve_frames_per_second": "frames per second of solve_seconds",
+    "solve_seconds": "s: wall time of the solves alone (no reading or writing), compilation included",
+    "compile_seconds": ("s: wall time the tracking process spent compiling its numeric kernels (Numba) during "
+                        "the frame loop: seconds on a machine's first run, 0 once they are cached on disk; a "
+                        "read-ahead child process's compilation is not counted"),
+    "solve_frames_per_second": "frames per second of solve_seconds, compilation left out",
     "loop_seconds": ("s: wall time of the whole frame loop: the solves, reading the silhouettes, building the "
                      "support images and medial axes (ahead of the solve: by default in a child process), each "
                      "frame's checks"),
-    "frames_per_second": "frames per second of loop_seconds",
+    "frames_per_second": "frames per second of loop_seconds, compilation left out",
     "iterations_per_frame": "solver steps per frame after the first",
     "mean_iterations_per_frame": "solver steps of a frame's main solve, mean over the frames after the first",
     "step_tolerance": "rad: the step norm under which a frame's main solve stops (null: never early)",
@@ -61,7 +64,8 @@ UNITS = {
     "trc_axes": "the axis convention the TRC files were read and written in, and the evidence",
     "trc_axes.used": "y-up (Pose2Sim, OpenSim) or z-up (the calibration's world)",
     "trc_axes.how": ("detected (against the cameras), forced (--trc-axes), default (no calibration: y-up) or "
-                     "triangulated (the targets were triangulated from --videos, in the model's Y-up frame)"),
+                     "triangulated (the targets were triangulated from --videos, in the model's Y-up frame) or "
+                     "declared by the C3D file (its POINT:Y_SCREEN, the axis drawn upward)"),
     "trc_axes.decided_by": "when detected, what told the conventions apart: silhouettes, images or upright body",
     "trc_axes.description": "the convention in words, and which outputs are written in it",
     "trc_axes.sampled_frames": "the TRC frame numbers the evidence was measured on",

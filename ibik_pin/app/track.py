@@ -33,8 +33,10 @@ from ibik_pin.app.silhouette_files import load_silhouettes
 from ibik_pin.app.video_inputs import SilhouetteQualityReader, read_videos, restrict_to_subject
 from ibik_pin.exceptions import FileFormatError, IbikWarning, InputError
 from ibik_pin.human import FOOT_KEYPOINTS, load_human
+from ibik_pin.io.c3d import c3d_axes, is_c3d
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, read_calibration
-from ibik_pin.io.trc import METRES_PER_UNIT, TrcData, read_trc
+from ibik_pin.io.keypoints import read_keypoints
+from ibik_pin.io.trc import METRES_PER_UNIT, TrcData
 from ibik_pin.model import BodyModel
 from ibik_pin.names import unknown_names_message
 from ibik_pin.subject.calibration import calibrate_subject, check_subject_size
@@ -47,11 +49,11 @@ from ibik_pin.tracking.tracker import Tracker
 from ibik_pin.vision.camera import cameras_in_frame, select_cameras
 
 
-def _trc_in_metres(option: str, path: Path) -> tuple[TrcData, np.ndarray, np.ndarray]:
+def _trc_in_metres(option: str, path: Path, c3d_mapping: Path | None = None) -> tuple[TrcData, np.ndarray, np.ndarray]:
     """A TRC read and checked for plausibility (app.input_checks): the data, its positions in
     metres and (F, T) bool, the values dropped as outliers (only for --targets: a static trial is a
     few still frames, with no leap to drop)."""
-    data = read_trc(path)
+    data = read_keypoints(path, c3d_mapping)
     if data.units not in METRES_PER_UNIT:
         raise FileFormatError(f"{path}: units {data.units!r} are not one of m, cm, mm")
     positions_m = data.positions * METRES_PER_UNIT[data.units]
@@ -87,7 +89,7 @@ def prepare_body(job: TrackJob, names: list[str], targets_m: np.ndarray,
     body = load_human(job.model) if job.model is not None else load_human()
     _check_names(job.targets, names, body)
     if job.static is not None:
-        static, static_m, _ = _trc_in_metres("--static", job.static)
+        static, static_m, _ = _trc_in_metres("--static", job.static, job.c3d_mapping)
         _check_names(job.static, static.marker_names, body)
         return calibrate_subject(body, static.marker_names, static_m, source=f"--static {job.static}").body
     if body.calibrated:
@@ -146,8 +148,10 @@ def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
     if targets is None:  # TrackJob refuses this unless the videos give the targets
         raise InputError("--targets: expected a TRC, or --videos and --calibration to triangulate one")
     trc_axes = "y-up" if videos.targets is not None else job.trc_axes  # triangulated in the cameras' Y-up frame
+    declared = c3d_axes(targets) if trc_axes == "auto" and is_c3d(targets) else None
+    trc_axes = declared or trc_axes
     settings = job.settings if videos.stack is None else replace(job.settings, stack=videos.stack)
-    trc, targets_trc_m, outliers = _trc_in_metres("--targets", targets)
+    trc, targets_trc_m, outliers = _trc_in_metres("--targets", targets, job.c3d_mapping)
     names = list(trc.marker_names)
     frame_count = targets_trc_m.shape[0]
     if frame_count == 0:
@@ -174,6 +178,8 @@ def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
                        silhouettes.frame if silhouettes is not None else None)
     if videos.targets is not None:  # y-up because ibik triangulated them so, not because the user said
         axes = replace(axes, how="triangulated")
+    elif declared is not None:
+        axes = replace(axes, how="declared by the C3D file")
     if not job.quiet:
         print(f"ibik: TRC axes: {axes.describe()}", file=sys.stderr)
     targets_m = axes.to_model(targets_trc_m)

@@ -40,7 +40,11 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - Python 3.10
     import tomli as tomllib
 
-__all__ = ["DEFAULT_KEYPOINT_MARKERS", "markers_to_keypoints", "read_c3d", "read_c3d_markers", "read_mapping"]
+__all__ = ["DEFAULT_KEYPOINT_MARKERS", "c3d_axes", "is_c3d", "markers_to_keypoints", "read_c3d", "read_c3d_markers",
+           "read_mapping"]
+
+# The byte at offset 1 of every C3D file: its parameter section's key.
+_C3D_KEY = 0x50
 
 # Per keypoint, the marker sets that give it, in order of preference: a marker of the keypoint's
 # name, BodyBuilder's joint points, Plug-in Gait's markers. HARRINGTON stands for the regression.
@@ -73,6 +77,43 @@ def _import_ezc3d():
     return ezc3d
 
 
+def is_c3d(path: PathLike) -> bool:
+    """Whether a regular file starts as a C3D file does (its second byte is 0x50), whatever its
+    suffix. A pipe or device is none: reading it could block, and the TRC reader names it."""
+    if not Path(path).is_file():
+        return False
+    try:
+        with open(path, "rb") as file:
+            head = file.read(2)
+    except OSError:
+        return False
+    return len(head) == 2 and head[1] == _C3D_KEY
+
+
+def c3d_axes(path: PathLike) -> str | None:
+    """The axis convention a C3D file declares: "z-up" or "y-up" from POINT:Y_SCREEN (the axis
+    drawn upward on screen, "+Z" in Vicon's and Qualisys' exports); None when it declares none or
+    another.
+
+    Raises:
+        FileFormatError: as read_c3d_markers.
+    """
+    point = _read(Path(path))["parameters"]["POINT"]
+    declared = point.get("Y_SCREEN", {}).get("value") or [""]
+    return {"+Z": "z-up", "+Y": "y-up"}.get(str(declared[0]).strip().upper())
+
+
+def _read(path: Path):
+    if not path.is_file():
+        raise FileFormatError(f"C3D file '{path}': expected a readable file, found "
+                              + ("no such file" if not path.exists() else "not a regular file"))
+    ezc3d = _import_ezc3d()
+    try:
+        return ezc3d.c3d(str(path))
+    except (RuntimeError, ValueError, OSError) as error:
+        raise FileFormatError(f"C3D file '{path}': cannot read it as C3D ({error})") from None
+
+
 def read_c3d_markers(path: PathLike) -> TrcData:
     """Every labelled point of a C3D file, in the file's units, gaps as NaN.
 
@@ -83,14 +124,7 @@ def read_c3d_markers(path: PathLike) -> TrcData:
         InputError: ezc3d is not installed, or the file's units are not m, cm or mm.
     """
     path = Path(path)
-    if not path.is_file():
-        raise FileFormatError(f"C3D file '{path}': expected a readable file, found "
-                              + ("no such file" if not path.exists() else "not a regular file"))
-    ezc3d = _import_ezc3d()
-    try:
-        content = ezc3d.c3d(str(path))
-    except (RuntimeError, ValueError, OSError) as error:
-        raise FileFormatError(f"C3D file '{path}': cannot read it as C3D ({error})") from None
+    content = _read(path)
     point = content["parameters"]["POINT"]
     labels = [str(label).split(":")[-1].strip() for label in point["LABELS"]["value"]]
     # LABELS2, LABELS3, ... continue LABELS past 255 points.

@@ -79,7 +79,7 @@ import pinocchio as pin
 
 from ibik_pin.exceptions import InputError, UnknownNameError
 from ibik_pin.human import neutral_stature
-from ibik_pin.io.trc import read_trc
+from ibik_pin.io.keypoints import read_keypoints
 from ibik_pin.model import BodyModel
 from ibik_pin.subject.calibration_result import CalibrationResult
 from ibik_pin.subject.calibration_settings import (
@@ -313,10 +313,11 @@ def calibrate_static_trial(
     frame_range: tuple[int | None, int | None] = (None, None),
     settings: CalibrationSettings | None = None,
 ) -> CalibrationResult:
-    """:func:`calibrate_subject` on a static trial's TRC file (m, cm or mm as its header says).
+    """:func:`calibrate_subject` on a static trial's TRC file (m, cm or mm as its header says), or a
+    C3D file (io.keypoints: its markers mapped to keypoints by io.c3d's default mapping).
 
     Args:
-        path: the TRC file; its markers are Pose2Sim keypoint names, every one known to the body.
+        path: the TRC or C3D file; its keypoints are Pose2Sim names, every one known to the body.
         body: the human to calibrate (not modified).
         frame_range: (first, last) TRC frame numbers (``Frame#``) to use, both included; None for
             the file's first or last frame.
@@ -326,7 +327,7 @@ def calibrate_static_trial(
         FileFormatError: the file cannot be read.
         InputError, UnknownNameError: see :func:`calibrate_subject`; no frame in the range.
     """
-    trc = read_trc(path).in_metres()
+    trc = read_keypoints(path).in_metres()
     first, last = frame_range
     numbers = trc.frame_numbers
     if numbers.size == 0:

@@ -37,7 +37,10 @@ class TrackingResult:
         limit_hits: per frame, the joints at a limit.
         dropped_targets: per frame, the targets absent (NaN) in that frame.
         disabled_views: per frame, the cameras whose silhouette was empty.
-        solve_seconds: wall time of the solves alone [s].
+        solve_seconds: wall time of the solves alone [s], Numba's compilation included.
+        compile_seconds: wall time this process spent compiling kernels during the frame loop [s]
+            (a first run on a machine; 0 once they are cached on disk); solve_compile_seconds:
+            its part inside the solves.
         loop_seconds: wall time of the whole frame loop [s]: the solves, reading the silhouettes,
             building the support images and medial axes, and each frame's checks.
         level_names: the L levels of the stack, highest first (the default stack's: "lower-body
@@ -63,6 +66,8 @@ class TrackingResult:
     disabled_views: list[list[str]] = field(default_factory=list)
     solve_seconds: float = 0.0
     loop_seconds: float = 0.0
+    compile_seconds: float = 0.0
+    solve_compile_seconds: float = 0.0
     target_names: list[str] = field(default_factory=list)
     target_distances: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     level_names: list[str] = field(default_factory=list)
@@ -74,10 +79,12 @@ class TrackingResult:
 
     @property
     def solve_frames_per_second(self) -> float:
-        """Frames per second of the solves alone [Hz]; NaN if unmeasured."""
-        return len(self.q) / self.solve_seconds if self.solve_seconds > 0 else float("nan")
+        """Frames per second of the solves alone, compilation left out [Hz]; NaN if unmeasured."""
+        seconds = self.solve_seconds - self.solve_compile_seconds
+        return len(self.q) / seconds if seconds > 0 else float("nan")
 
     @property
     def frames_per_second(self) -> float:
-        """Frames per second of the whole frame loop [Hz]; NaN if unmeasured."""
-        return len(self.q) / self.loop_seconds if self.loop_seconds > 0 else float("nan")
+        """Frames per second of the whole frame loop, compilation left out [Hz]; NaN if unmeasured."""
+        seconds = self.loop_seconds - self.compile_seconds
+        return len(self.q) / seconds if seconds > 0 else float("nan")

@@ -36,6 +36,7 @@ from ibik_pin.tasks.image import support_at
 from ibik_pin.tasks.segments import SegmentCriterion
 from ibik_pin.tasks.silhouette_axis import SilhouetteAxisTask
 from ibik_pin.tasks.weighted_sum import WeightedSum
+from ibik_pin.tracking.compile_time import CompileTimer
 from ibik_pin.tracking.first_frame import solve_first_frame
 from ibik_pin.tracking.levels import StackPlan, StackTasks
 from ibik_pin.tracking.outcomes import LevelOutcome, level_outcomes
@@ -248,7 +249,9 @@ class Tracker:
         loop_started = time.perf_counter()
         records = silhouettes if isinstance(silhouettes, FrameRecords) else None
         outcomes_job = functools.partial(self._outcomes_in_copy, plan, names, targets, report_index, configuration)
-        with FrameImagesAhead(prepare, frame_count, self.settings.read_ahead, records, outcomes_job) as images:
+        compiling, solves = CompileTimer(), []
+        with compiling.recording(), FrameImagesAhead(prepare, frame_count, self.settings.read_ahead, records,
+                                                     outcomes_job) as images:
             for frame in range(frame_count):
                 present = self._set_targets(names, targets[frame])
                 result.dropped_targets.append([n for n, p in zip(names, present, strict=True) if not p])
@@ -273,7 +276,8 @@ class Tracker:
                     solved = self._solve(configuration, plan, free=free)
                 result.level_reports.append(solved.levels)
                 result.iterations.append(int(solved.iterations))
-                result.solve_seconds += time.perf_counter() - started
+                solves.append((started, time.perf_counter()))
+                result.solve_seconds += solves[-1][1] - started
                 result.q[frame] = configuration.q
                 result.keypoints[frame] = configuration.frame_positions(keypoint_ids)
                 # Each present target's distance, read in one call (as FramePositionTask.compute_error).
@@ -298,6 +302,8 @@ class Tracker:
                     progress()
             _take_outcomes(result, images.finish_jobs())
         result.loop_seconds = time.perf_counter() - loop_started
+        result.compile_seconds = compiling.seconds
+        result.solve_compile_seconds = compiling.seconds_within(solves)
         return result
 
     def _outcomes_in_copy(self, plan: StackPlan, names: list[str], targets: np.ndarray, report_index: list,
