@@ -12,6 +12,7 @@ from ibik_pin.app.report import ResidualStats, TrackingReport
 from ibik_pin.tracking.outcomes import LevelOutcome
 from ibik_pin.tracking.result import TrackingResult
 from ibik_pin.tracking.settings import TrackingSettings
+from tests.report_checks import undefined_keys
 
 
 def refuse_constant(token):
@@ -130,12 +131,7 @@ def test_report_json_names_the_unit_of_every_figure_and_a_0_1_overlap(report):
 
 
 def test_every_key_of_report_json_has_a_unit_or_a_definition(report):
-    """Top-level keys and the keys of the records inside (trc_axes, solver_levels) each have their
-    entry in "units", under their own name or as "record.key"."""
     written = json.loads(report.to_json(), parse_constant=refuse_constant)
     units = written["units"]
-    undefined = [key for key in written if key not in units and key != "units"]
-    for record in ("trc_axes", "solver_levels"):
-        undefined += [f"{record}.{key}" for key in written[record] if f"{record}.{key}" not in units]
-    assert undefined == []
+    assert undefined_keys(written) == []
     assert all(status in units["solver_levels.status_per_frame"] for status in ("solved", "relaxed", "failed"))

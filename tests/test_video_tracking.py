@@ -25,6 +25,7 @@ from ibik_pin.vision.camera import cameras_in_frame
 from ibik_pin.vision.learned_pose import MEDIAPIPE_INSTALL, detect_pose_in_frames, learned_pose_available
 from tests.opensim_ik import opensim_ik_rms_deg, worst_beyond_tolerance
 from tests.paths import TEST_DATA
+from tests.report_checks import undefined_keys
 
 VIDEOS = TEST_DATA / "pose2sim_video"
 CALIBRATION = VIDEOS / "calibration.toml"
@@ -103,6 +104,15 @@ def test_learned_silhouettes_hold_the_subject_and_nobody_else(cameras, reference
 
 
 @needs_mediapipe
+def test_every_key_of_a_from_video_report_has_a_unit_or_a_definition(tracked):
+    """With silhouettes, triangulation and the cameras' check, their records' keys too."""
+    code, out = tracked
+    assert code == 0
+    written = json.loads((out / "report.json").read_text())
+    assert {"silhouettes", "triangulation", "extrinsics"} <= {key for key, value in written.items() if value}
+    assert undefined_keys(written) == []
+
+
 def test_opensim_ik_on_joints_trc_of_a_from_video_run_finds_motion_mot(tracked, tmp_path):
     """The triangulated Hip is the hip midpoint: the pelvis' keypoints are collinear, and its virtual
     markers hold its roll."""

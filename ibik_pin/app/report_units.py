@@ -33,6 +33,10 @@ UNITS = {
     "image_stop": "where the image steps end: peak (the criterion stopped rising) or count (iterations_per_frame)",
     "mask_filter_radius": "frames on each side of the temporal majority filter",
     "end_effector_residual_m": "m: per frame, the mean distance of the present targets to the model's keypoints",
+    "end_effector_residual_m.per_frame": "m: each frame's value (null where no target was present)",
+    "end_effector_residual_m.mean": "m: mean of per_frame over the frames (those of keypoint_residual_m too)",
+    "end_effector_residual_m.median": "m: median of per_frame over the frames",
+    "end_effector_residual_m.max": "m: largest of per_frame",
     "keypoint_residual_m": "m: per target keypoint, the distance of the model's keypoint to its target",
     "overlap_per_view": ("px: the paper's image criterion h (eq. 5-6) at each frame's solution, the mean over "
                          "the skeleton's sample points of the silhouette's capped signed distance (positive "
@@ -44,8 +48,15 @@ UNITS = {
     "trc_axes.upright_cosine": "-1 to 1",
     "silhouettes": "null without silhouettes; otherwise the silhouettes.* entries",
     "triangulation": "null when --targets were given; otherwise the triangulation.* entries",
+    "silhouettes.segmenter": "where the silhouettes came from: mediapipe, mog2 (from --videos) or masks (given)",
     "silhouettes.targets_inside_per_view": "0-1: per frame, the share of the projected targets inside the silhouette",
+    "silhouettes.targets_inside_mean": "0-1: per camera, the mean of targets_inside_per_view over the frames",
     "silhouettes.mask_area_per_view": "px: per frame, the silhouette's area",
+    "triangulation.file": "the triangulated TRC written with the outputs",
+    "triangulation.keypoints": "the keypoints it holds",
+    "triangulation.tracked_keypoints": "those of them used as targets",
+    "triangulation.frames_swapped_per_view": ("per camera, the number of frames whose left and right the detector "
+                                              "had exchanged (resolved across views)"),
     "triangulation.reprojection_median_m": "m: reprojection error at the point's depth, median over the frames",
     "triangulation.landmarks_used_per_view": "0-1",
     "extrinsics": ("null unless MediaPipe's landmarks from three cameras or more were checked against each other; "
@@ -53,6 +64,8 @@ UNITS = {
     "extrinsics.reprojection_px": ("px: per camera, median distance from its detections to the landmarks the other "
                                    "views triangulate, projected, as calibrated; reprojection_after_px: re-fitted"),
     "extrinsics.turn_deg": "deg: how far each re-fitted camera turned about its centre",
+    "extrinsics.refitted": "the cameras turned by --refit-cameras",
+    "extrinsics.reprojection_after_px": "px: extrinsics.reprojection_px with the re-fitted cameras",
     "frames": "the number of frames tracked (rows of the targets TRC)",
     "frame_numbering": "how the frames of this report are numbered",
     "image": "true when the image criterion was used (false: the blind baseline, or no view)",
