@@ -63,8 +63,9 @@ def main(argv: list[str] | None = None) -> dict:
                         help="limb lengths: the static's; refined on the trial's targets (reach) or on its "
                              "targets and silhouettes (images; sweepkit/lengths.py); the trial's true ones "
                              "(oracle, a diagnostic)")
-    parser.add_argument("--reach-smoothing", type=int, default=1, metavar="FRAMES",
-                        help="frames the targets' reach is averaged over before its bound (trial_lengths)")
+    parser.add_argument("--reach-smoothing", type=int, default=3, metavar="FRAMES",
+                        help="frames the targets' reach is averaged over before its bound (trial_lengths; "
+                             "default 3)")
     parser.add_argument("--keep", type=Path, default=None,
                         help="keep each condition's files under this folder, and reuse those already there")
     parser.add_argument("--quick", action="store_true", help="2 conditions of 12 frames, IBIK 2 views (a smoke test)")

@@ -59,7 +59,7 @@ def static_lengths(inputs: ConditionInputs) -> dict[str, float]:
     return segment_lengths_from_keypoints(static.marker_names, static.positions)
 
 
-def reach_static(inputs: ConditionInputs, smoothing_frames: int = 1) -> tuple[Path, dict]:
+def reach_static(inputs: ConditionInputs, smoothing_frames: int = 3) -> tuple[Path, dict]:
     """The static with every limb lengthened as far as the trial's targets need."""
     lengths = static_lengths(inputs)
     targets = read_trc(inputs.targets()).in_metres()
@@ -75,7 +75,7 @@ def oracle_static(inputs: ConditionInputs) -> tuple[Path, dict]:
 
 
 def image_static(inputs: ConditionInputs, estimate: TrcData, views: int, silhouettes: str,
-                 settings: TrackingSettings | None = None, smoothing_frames: int = 1) -> tuple[Path, dict]:
+                 settings: TrackingSettings | None = None, smoothing_frames: int = 3) -> tuple[Path, dict]:
     """The static with the legs' lengths the first `views` cameras' silhouettes prefer around the
     pose `estimate` (a PIK run's joints.trc), the arms' by reach."""
     settings = settings or TrackingSettings()

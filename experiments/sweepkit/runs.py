@@ -91,8 +91,8 @@ def summarize(runs: list[dict]) -> dict:
     summary: dict = {"all": {}, "by_kind": {}, "by_motion": {}}
     variants = list(dict.fromkeys(r["variant"] for r in runs))
     for silhouettes in ("clean", "defects"):
-        if not any(r["silhouettes"] == silhouettes for r in runs):
-            continue
+        if silhouettes != "clean" and not any(r["silhouettes"] == silhouettes for r in runs):
+            continue  # no IBIK run with these silhouettes (PIK's stand under "clean")
         for name in variants:
             chosen = [r for r in runs if r["variant"] == name and r["silhouettes"] in (silhouettes, "none")]
             if not chosen:
