@@ -234,27 +234,27 @@ def run_bad(arguments, capsys) -> str:
     return error
 
 
-def test_unknown_keypoint_names_say_which_are_known(dataset, tmp_path, capsys):
+def track_with_target_renamed(dataset, tmp_path, capsys, old: str, new: str) -> str:
+    """The error of a run whose targets TRC calls its keypoint `old` `new` instead."""
     targets = read_trc(dataset.targets)
-    targets.marker_names[0] = "LeftFoot"
-    path = tmp_path / "bad.trc"
+    targets.marker_names[targets.marker_names.index(old)] = new
+    path = tmp_path / "renamed.trc"
     write_trc(path, targets)
     arguments = track_arguments(dataset, tmp_path / "out")
     arguments[arguments.index("--targets") + 1] = str(path)
-    error = run_bad(arguments, capsys)
+    return run_bad(arguments, capsys)
+
+
+def test_unknown_keypoint_names_say_which_are_known(dataset, tmp_path, capsys):
+    first = read_trc(dataset.targets).marker_names[0]
+    error = track_with_target_renamed(dataset, tmp_path, capsys, first, "LeftFoot")
     assert "unknown keypoint name(s) LeftFoot; known keypoints: Hip, LHip" in error
     assert not (tmp_path / "out").exists()
 
 
 def test_a_keypoint_name_with_a_look_alike_letter_is_explained(dataset, tmp_path, capsys):
-    targets = read_trc(dataset.targets)
-    index = targets.marker_names.index("RAnkle")
-    targets.marker_names[index] = "RAnkl\u0435"  # a Cyrillic e, which prints as the Latin one
-    path = tmp_path / "lookalike.trc"
-    write_trc(path, targets)
-    arguments = track_arguments(dataset, tmp_path / "out")
-    arguments[arguments.index("--targets") + 1] = str(path)
-    error = run_bad(arguments, capsys)
+    # A Cyrillic e, which prints as the Latin one.
+    error = track_with_target_renamed(dataset, tmp_path, capsys, "RAnkle", "RAnkl\u0435")
     assert "character 6 is '\u0435' (CYRILLIC SMALL LETTER IE, U+0435), not 'e' (LATIN SMALL LETTER E" in error
 
 

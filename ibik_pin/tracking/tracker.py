@@ -26,6 +26,7 @@ from ibik_pin.exceptions import EmptySilhouetteWarning, InputError
 from ibik_pin.feet import foot_point_joints
 from ibik_pin.limits import JointLimits
 from ibik_pin.model import BodyModel
+from ibik_pin.names import unknown_names_message
 from ibik_pin.readahead.frame_images import FrameImages, frame_images
 from ibik_pin.readahead.frames_ahead import READ_AHEAD_MODES, FrameImagesAhead
 from ibik_pin.readahead.image_process import FrameRecords
@@ -205,8 +206,8 @@ class Tracker:
         unknown = [name for name in names if name not in self.body.keypoints]
         if unknown:
             raise InputError(
-                f"unknown keypoint name(s) {', '.join(unknown)}; known keypoints: "
-                + ", ".join(self.body.keypoints)
+                f"names: unknown keypoint name(s) {unknown_names_message(unknown, list(self.body.keypoints))}; "
+                "known keypoints: " + ", ".join(self.body.keypoints), parameter="names"
             )
         targets = np.asarray(targets, dtype=float)
         if targets.ndim != 3 or targets.shape[1:] != (len(names), 3):
@@ -217,7 +218,9 @@ class Tracker:
         source: SilhouetteSource | None = None
         if use_image:
             if silhouettes is None:
-                raise InputError("the image criterion needs silhouettes: give masks or videos, or --no-image")
+                raise InputError("silhouettes: the image criterion needs them (a function of the frame index "
+                                 "giving one mask per camera); give them, or settings.use_image=False",
+                                 parameter="silhouettes")
             source = silhouettes
             if self.settings.mask_filter_radius > 0:
                 source = TemporalMajority(silhouettes, frame_count, self.settings.mask_filter_radius)
