@@ -54,3 +54,27 @@ def test_a_quick_sweep_writes_every_figure(tmp_path):
     # Targets are met to within the drawn noise and the model's keypoint offsets.
     assert result["summary"]["all"]["pik/clean"]["targets"]["p90"] < 40.0
     assert "| IBIK 2v | clean |" in (tmp_path / "sweep.md").read_text()
+
+
+@needs_data
+def test_the_silhouette_body_widens_flattens_and_loosens_as_drawn():
+    from realdata.clips import load_clip
+    from sweepkit.body import BodyShape, SweepBody
+    from sweepkit.conditions import place_cameras
+    from sweepkit.motions import anatomy_of
+
+    condition = draw_condition(8, seed=0)  # jumps01_01: 01_01.bvh's MotionBuilder names
+    spec = MOTIONS[condition.motion]
+    clip = load_clip(spec, DEFAULT_DATA, 4, 30.0)
+    cameras, _ = place_cameras(clip, condition)
+
+    def pixels(shape: BodyShape) -> int:
+        body = SweepBody(clip.joint_names, spec.source, anatomy_of(clip.joint_names, spec.source),
+                         clip.static_joints, shape)
+        return int(body.render_frame(clip.joints[2], cameras[0])[0].sum())
+
+    plain = pixels(BodyShape())
+    assert pixels(BodyShape(limb_radius_factor=0.7)) < plain < pixels(BodyShape(limb_radius_factor=1.4))
+    assert pixels(BodyShape(loose_m=0.03)) > 1.05 * plain
+    flat = pixels(BodyShape(ellipticity=1.5))
+    assert flat != plain and abs(flat - plain) < 0.15 * plain  # the sections' areas are kept
