@@ -7,7 +7,8 @@ the keypoints below it carried along), which ``ibik track --static`` then calibr
 - "images": the legs' lengths (one factor for both segments: the silhouettes, as the criteria read
   them, tell a leg's length better than its split between thigh and shank) chosen on the views'
   silhouettes around the PIK pose, pairs that cannot reach the targets excluded; the arms by reach
-  (the criteria put hanging arms against the trunk).
+  (the criteria put hanging arms against the trunk). One view sees no depth: there the legs too go
+  by reach (on the sweep, one view's silhouettes took IBIK 1v knees from 34.0 to 36.2 mm).
 """
 
 from __future__ import annotations
@@ -78,6 +79,9 @@ def image_static(inputs: ConditionInputs, estimate: TrcData, views: int, silhoue
                  settings: TrackingSettings | None = None, smoothing_frames: int = 3) -> tuple[Path, dict]:
     """The static with the legs' lengths the first `views` cameras' silhouettes prefer around the
     pose `estimate` (a PIK run's joints.trc), the arms' by reach."""
+    if views < 2:
+        path, report = reach_static(inputs, smoothing_frames)
+        return path, dict(report, evidence="one view: the reach only")
     settings = settings or TrackingSettings()
     body = calibrate_static_trial(inputs.static, load_human()).body
     model_lengths = keypoint_lengths(body)
