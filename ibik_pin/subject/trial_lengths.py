@@ -157,7 +157,8 @@ def refine_from_reach(lengths: Mapping[str, float], names: Sequence[str], target
     return TrialLengths(refined, before, evidence)
 
 
-def _circle_frames(root: np.ndarray, middle: np.ndarray, end: np.ndarray) -> tuple[np.ndarray, ...]:
+def _circle_frames(root: np.ndarray, middle: np.ndarray,
+                   end: np.ndarray) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
     """The limb's axis (unit, root to end), its length, and two unit vectors across it, the first
     toward the middle joint (any perpendicular for a straight limb)."""
     axis = end - root
@@ -272,16 +273,16 @@ def refine_from_images(
             current = positions_of(keypoints, task.frame_ids)
             pose = task.at_pose(current)
             task_moves, movers = [], []
-            for limb, (middle_id, points) in enumerate(zip(moves, placements, strict=True)):
+            for index, (middle_id, points) in enumerate(zip(moves, placements, strict=True)):
                 rows = np.flatnonzero(task.frame_ids == middle_id)
                 if rows.size:
                     task_moves.append((rows, points.reshape(-1, 3)))
-                    movers.append(limb)
+                    movers.append(index)
             if task_moves:
-                for limb, limb_values in zip(movers, task.values_at_moves(current, pose, task_moves), strict=True):
-                    values[limb] += weight * np.asarray(limb_values).reshape(grid_upper.size, int(swivels))
-        for limb, name in enumerate(chosen):
-            scores[name] += values[limb].max(axis=1)
+                for index, limb_values in zip(movers, task.values_at_moves(current, pose, task_moves), strict=True):
+                    values[index] += weight * np.asarray(limb_values).reshape(grid_upper.size, int(swivels))
+        for index, name in enumerate(chosen):
+            scores[name] += values[index].max(axis=1)
     before = {name: float(value) for name, value in lengths.items()}
     refined = dict(before)
     evidence = {}
