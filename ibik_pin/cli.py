@@ -71,6 +71,10 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
                              "written to calibration_refitted.toml)")
     parser.add_argument("--cameras", help="comma-separated subset of the calibration's cameras")
     parser.add_argument("--model", help="URDF of the human (default: example-robot-data's)")
+    parser.add_argument("--trial-lengths", choices=("off", "reach"), default="off",
+                        help="reach: lengthen a limb whose calibrated segments cannot reach its targets on this "
+                             "trial (joint centres from markers are not rigid across takes); report.json gives each "
+                             "segment's change (default: off)")
     parser.add_argument("--method", choices=sorted(SOLVERS), default="qp",
                         help="solver scheme (default: qp, the hierarchical QP with joint limits)")
     parser.add_argument("--qp-solver", metavar="NAME",
@@ -145,6 +149,7 @@ def _job(arguments: argparse.Namespace) -> TrackJob:
         cameras=None if arguments.cameras is None else [name.strip() for name in arguments.cameras.split(",")],
         model=arguments.model,
         c3d_mapping=arguments.c3d_mapping,
+        trial_lengths=arguments.trial_lengths,
         settings=TrackingSettings(method=arguments.method, qp_solver=arguments.qp_solver or DEFAULT_QP_SOLVER,
                                   iterations=arguments.iterations,
                                   step_tolerance=arguments.step_tolerance, image_stop=arguments.image_stop,

@@ -167,6 +167,30 @@ def test_the_targets_as_c3d_give_the_joints_of_their_trc_within_a_millimetre(dat
     assert (report["trc_axes"]["used"], report["trc_axes"]["how"]) == ("y-up", "declared by the C3D file")
 
 
+def test_a_static_take_5_percent_small_is_lengthened_to_reach_the_trial_and_reported(dataset, tmp_path):
+    static = read_trc(dataset.folder / "static.trc")
+    centre = np.nanmean(static.positions, axis=(0, 1))
+    static.positions = centre + 0.95 * (static.positions - centre)  # every segment 5 % short
+    write_trc(tmp_path / "small_static.trc", static)
+    arguments = track_arguments(dataset, tmp_path / "out", "--no-image", "--trial-lengths", "reach")
+    arguments[arguments.index("--static") + 1] = str(tmp_path / "small_static.trc")
+    assert main(arguments) == 0
+    segments = json.loads((tmp_path / "out" / "report.json").read_text())["trial_lengths"]["segments_mm"]
+    truth = read_trc(dataset.truth)
+    position = dict(zip(truth.marker_names, np.transpose(truth.positions * METRES_PER_UNIT[truth.units] * 1e3,
+                                                         (1, 0, 2)), strict=True))
+    for side, limb in (("L", "left"), ("R", "right")):
+        true_sum = np.median(np.linalg.norm(position[f"{side}Hip"] - position[f"{side}Knee"], axis=1)
+                             + np.linalg.norm(position[f"{side}Knee"] - position[f"{side}Ankle"], axis=1))
+        static_sum = segments[f"{limb}_thigh"]["static"] + segments[f"{limb}_shank"]["static"]
+        trial_sum = segments[f"{limb}_thigh"]["trial"] + segments[f"{limb}_shank"]["trial"]
+        # The static's legs are about 40 mm short; the trial's reach, a lower bound (a walking leg is
+        # never quite straight), gives back most of it (measured 30 of 44 mm on the right) and no more.
+        assert static_sum < true_sum - 25.0, (limb, static_sum, true_sum)
+        assert static_sum + 0.5 * (true_sum - static_sum) < trial_sum < true_sum + 5.0, (limb, trial_sum, true_sum)
+    assert all(segment["change"] >= 0.0 for segment in segments.values())
+
+
 def test_the_qp_backend_is_chosen_on_the_command_line_and_reported(dataset, tmp_path):
     out = tmp_path / "out"
     assert main(track_arguments(dataset, out, "--no-image", "--qp-solver", "proxsuite", "--iterations", "3")) == 0

@@ -20,6 +20,8 @@ from ibik_pin.tracking.settings import TrackingSettings
 
 # Where the silhouettes of --videos come from (app.video_inputs.resolve_segmenter).
 SEGMENTERS = ("auto", "mediapipe", "mog2")
+# How the limb lengths are refined on the trial itself (subject.trial_lengths): not, or by the targets' reach.
+TRIAL_LENGTHS = ("off", "reach")
 # Bounds that keep a run finite: at 1000 steps a frame already takes seconds, and a majority vote
 # over more than 61 frames (a second at 60 Hz) is no longer a filter of flicker.
 MAX_ITERATIONS = 1000
@@ -48,6 +50,8 @@ class TrackJob:
     `trc_axes` is the TRC files' axis convention: "auto" (detected against the calibration's
     cameras; y-up without a calibration; a C3D file's own declaration, POINT:Y_SCREEN, where it has
     one), "y-up" (Pose2Sim, OpenSim) or "z-up" (the calibration's own world); see app.axes.
+    `trial_lengths` "reach" lengthens a limb whose calibrated segments cannot reach its targets'
+    distance on the trial (subject.trial_lengths.refine_from_reach); "off" keeps the calibration's.
     `targets` and `static` may be C3D files (recognised by content), their markers mapped to
     keypoints by `c3d_mapping` (a TOML mapping file; None: io.c3d's default mapping).
     """
@@ -69,6 +73,7 @@ class TrackJob:
     triangulated_limbs: bool = False
     refit_cameras: list[str] | None = None
     c3d_mapping: Path | None = None
+    trial_lengths: str = "off"
 
     def __post_init__(self) -> None:
         """Paths given as str become Paths; what the CLI refuses, the API refuses too (InputError)."""
@@ -93,6 +98,9 @@ class TrackJob:
         if self.triangulated_limbs and self.settings.stack is not None:
             raise InputError("--triangulated-limbs and --stack: give the elbows and knees a level in your "
                              "stack instead")
+        if self.trial_lengths not in TRIAL_LENGTHS:
+            raise InputError(f"--trial-lengths: expected one of {', '.join(TRIAL_LENGTHS)}, "
+                             f"found {self.trial_lengths!r}")
         if self.segmenter not in SEGMENTERS:
             raise InputError(f"--segmenter: expected one of {', '.join(SEGMENTERS)}, found {self.segmenter!r}")
         if self.trc_axes not in ("auto", *TRC_AXES):

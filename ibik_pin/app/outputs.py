@@ -20,6 +20,7 @@ from ibik_pin.io.osim import virtual_marker_positions, virtual_markers, write_os
 from ibik_pin.io.trc import METRES_PER_UNIT, TrcData, write_trc
 from ibik_pin.io.video import VideoReader
 from ibik_pin.model import BodyModel
+from ibik_pin.subject.trial_lengths import TrialLengths
 from ibik_pin.tracking.result import TrackingResult
 from ibik_pin.tracking.settings import TrackingSettings
 from ibik_pin.vision.extrinsics_refit import ExtrinsicsRefit
@@ -36,7 +37,8 @@ def write_outputs(folder: Path, job: TrackJob, settings: TrackingSettings, name:
                   cameras: list, silhouettes: Silhouettes | None, result: TrackingResult, axes: AxesChoice,
                   outliers: np.ndarray | None = None, *, silhouette_report: SilhouetteQuality | None = None,
                   triangulation_report: TriangulationReport | None = None,
-                  extrinsics: ExtrinsicsRefit | None = None) -> TrackingReport:
+                  extrinsics: ExtrinsicsRefit | None = None,
+                  trial_lengths: TrialLengths | None = None) -> TrackingReport:
     """joints.trc (in the TRC's own axis convention), q.csv, motion.mot, motion.bvh, model.osim
     (model frame, Y up), report.json (and the overlays) into `folder`. `settings`: the tracking's,
     as solved; `name`: the targets file's name without its suffix, to name what is written from it;
@@ -73,6 +75,7 @@ def write_outputs(folder: Path, job: TrackJob, settings: TrackingSettings, name:
         trc.frame_numbers, times, frame_rate, axes, outliers,
     )
     report.silhouettes, report.triangulation, report.extrinsics = silhouette_report, triangulation_report, extrinsics
+    report.trial_lengths = None if trial_lengths is None else trial_lengths.report()
     report.write(folder / "report.json")
     if job.overlay:
         write_overlays(folder, job.videos, name, body, cameras, silhouettes, result, trc, frame_rate)

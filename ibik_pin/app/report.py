@@ -219,6 +219,9 @@ class TrackingReport:
             (app.input_reports.TriangulationReport); None when they were given.
         extrinsics: the check of the cameras' poses against each other's detections, and the
             re-fitted ones (vision.extrinsics_refit.ExtrinsicsRefit); None when it did not run.
+        trial_lengths: with --trial-lengths reach, each limb segment's static and trial length and
+            their change [mm], and per limb what decided (subject.trial_lengths.TrialLengths.report);
+            None otherwise.
         units: :data:`UNITS`, written into the file so that it describes itself.
     """
 
@@ -255,6 +258,7 @@ class TrackingReport:
     silhouettes: SilhouetteQuality | None = None
     triangulation: TriangulationReport | None = None
     extrinsics: ExtrinsicsRefit | None = None
+    trial_lengths: dict[str, Any] | None = None
     units: dict[str, str] = field(default_factory=lambda: dict(UNITS))
 
     @classmethod

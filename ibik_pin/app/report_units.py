@@ -85,6 +85,11 @@ UNITS = {
     "solver_levels": "per level of the priority stack, what it got at each frame (solver_levels.* entries)",
     "solver_levels.stack": "where the stack came from: default, or the stack file",
     "solver_levels.levels": "the stack's levels, highest priority first",
+    "trial_lengths": "null unless --trial-lengths reach; otherwise the trial_lengths.* entries",
+    "trial_lengths.segments_mm": ("mm: per limb segment, its static (calibrated) length, its trial length and the "
+                                  "change; a limb is only ever lengthened, to reach its targets"),
+    "trial_lengths.evidence": ("per limb lengthened, what decided: the reach (98th percentile of the root-to-end "
+                               "distance over 3-frame averages) [m], the segments' sum [m] and the factor"),
     "method": "the solver scheme: qp, stack, liegeois or ik",
     "qp_solver": "the backend that solved the qp scheme's level QPs (null for the other schemes)",
     "joint_limit_hits": "per TRC frame, the joints (Pinocchio joint names) at a position limit at the solution",

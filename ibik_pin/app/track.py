@@ -41,10 +41,12 @@ from ibik_pin.model import BodyModel
 from ibik_pin.names import unknown_names_message
 from ibik_pin.subject.calibration import calibrate_subject, check_subject_size
 from ibik_pin.subject.scaling import (
+    keypoint_lengths,
     scale_from_stature,
     scale_human,
     segment_lengths_from_keypoints,
 )
+from ibik_pin.subject.trial_lengths import apply_lengths, refine_from_reach
 from ibik_pin.tracking.tracker import Tracker
 from ibik_pin.vision.camera import cameras_in_frame, select_cameras
 
@@ -185,6 +187,10 @@ def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
     targets_m = axes.to_model(targets_trc_m)
     # Every keypoint scales the segments, tracked or not.
     body = prepare_body(job, names, targets_m, calibrate_on_targets=videos.triangulation is not None)
+    trial_lengths = None
+    if job.trial_lengths == "reach":  # a static take's joint centres are not rigid across takes
+        trial_lengths = refine_from_reach(keypoint_lengths(body), names, targets_m)
+        body = apply_lengths(body, trial_lengths)
     reader = None  # the silhouettes, each frame's read once for the tracker and the report
     if silhouettes is not None:
         if silhouettes.video_masks is not None:
@@ -202,4 +208,5 @@ def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
     # tracker.settings: as solved (a stack's image task may set the criterion)
     return write_outputs(staging, job, tracker.settings, targets.stem, trc, body, cameras, silhouettes, result, axes,
                          outliers[:, tracked], silhouette_report=silhouette_report,
-                         triangulation_report=videos.triangulation, extrinsics=videos.extrinsics)
+                         triangulation_report=videos.triangulation, extrinsics=videos.extrinsics,
+                         trial_lengths=trial_lengths)
