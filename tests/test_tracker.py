@@ -233,7 +233,7 @@ def test_cameras_without_silhouettes_are_refused(human, sequence):
     _, targets = sequence
     camera = look_at_camera("front", (160, 120), 150.0, np.array([3.0, 1.0, 0.0]), np.zeros(3),
                             np.array([0.0, 1.0, 0.0]))
-    with pytest.raises(InputError, match="silhouettes: the image criterion needs them .*settings.use_image=False"):
+    with pytest.raises(InputError, match=r"silhouettes: the image criterion needs them .*settings\.use_image=False"):
         Tracker(human, [camera], fast_settings()).track(TARGETS, targets)
 
 
