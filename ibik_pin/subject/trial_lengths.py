@@ -26,14 +26,15 @@ report (TrialLengths.report).
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ibik_pin.exceptions import InputError
-from ibik_pin.model import BodyModel
-from ibik_pin.subject.scaling import keypoint_lengths, scale_human
+from ibik_pin.model import BodyModel, set_segment_length
 from ibik_pin.tasks.segments import SegmentCriterion
 
 __all__ = ["DEFAULT_FACTORS", "LIMBS", "Limb", "TrialLengths", "apply_lengths", "reach_bounds",
@@ -58,6 +59,11 @@ LIMBS: dict[str, Limb] = {
     "left_arm": Limb("LShoulder", "LElbow", "LWrist", "left_upper_arm", "left_forearm"),
     "right_arm": Limb("RShoulder", "RElbow", "RWrist", "right_upper_arm", "right_forearm"),
 }
+# The joint whose placement in its parent is each limb segment (the human's keypoints of a limb sit
+# at its joints' origins, and a calibration fits them on the segments near there).
+SEGMENT_JOINTS = {f"{side}_{segment}": f"{side}_{joint}" for side in ("left", "right")
+                  for segment, joint in (("thigh", "knee_Z"), ("shank", "ankle_Y"), ("upper_arm", "elbow_Z"),
+                                         ("forearm", "wrist_Z"))}
 #: Factors tried on each calibrated length: +-6 %, by 1.5 % (a static take was seen 3-7 % off).
 DEFAULT_FACTORS = np.linspace(0.94, 1.06, 9)
 
@@ -309,8 +315,14 @@ def refine_from_images(
 
 
 def apply_lengths(body: BodyModel, refined: TrialLengths) -> BodyModel:
-    """A copy of the calibrated `body` with the refined lengths that changed; every other length
-    as the body has it (scale_human is given them all, so that it moves nothing else)."""
+    """A copy of the calibrated `body` whose refined segments are stretched by their factor, and
+    nothing else moved: each segment's child joint placement in its parent scaled (model's
+    set_segment_length), so that the keypoints fitted on the segment move with its end."""
     if not refined.changes:
         return body
-    return scale_human(body, dict(keypoint_lengths(body), **{name: refined.lengths[name] for name in refined.changes}))
+    model = copy.deepcopy(body.model)
+    for name in refined.changes:
+        joint = SEGMENT_JOINTS[name]
+        offset = float(np.linalg.norm(model.jointPlacements[model.getJointId(joint)].translation))
+        set_segment_length(model, joint, offset * refined.lengths[name] / refined.before[name])
+    return dataclasses.replace(body, model=model)
