@@ -10,6 +10,7 @@ import numpy as np
 from ibik_pin.app.axes import AxesChoice
 from ibik_pin.app.input_reports import SilhouetteQuality, TriangulationReport
 from ibik_pin.app.job import TrackJob
+from ibik_pin.app.outdir import overlay_file_names
 from ibik_pin.app.report import TrackingReport
 from ibik_pin.app.silhouette_files import Silhouettes, camera_folder_entries, fit_to_size
 from ibik_pin.configuration import Configuration
@@ -108,6 +109,7 @@ def write_overlays(folder: Path, videos: Path | None, name: str, body: BodyModel
                        for a, b in body.segments]
     write_html_replay(folder / "replay.html", result.keypoint_names, segment_indices,
                       result.keypoints, frame_rate, title=f"ibik_pin: {name}")
+    file_names = overlay_file_names([camera.name for camera in cameras])
     starts = result.keypoints[:, [a for a, _ in segment_indices]]
     ends = result.keypoints[:, [b for _, b in segment_indices]]
     for index, camera in enumerate(cameras):
@@ -121,7 +123,7 @@ def write_overlays(folder: Path, videos: Path | None, name: str, body: BodyModel
             frames = (np.zeros((height, width, 3), np.uint8) for _ in range(len(times)))
         masks = (silhouettes.mask(f, index) for f in range(len(times))) if silhouettes else None
         try:
-            write_overlay_video(folder / f"overlay_{camera.name}.mp4", frames, skeletons,
+            write_overlay_video(folder / file_names[camera.name], frames, skeletons,
                                 frame_rate, masks=masks, frame_numbers=trc.frame_numbers, times=times)
         finally:
             if reader is not None:

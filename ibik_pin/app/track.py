@@ -26,7 +26,7 @@ from ibik_pin.app.input_checks import (
 )
 from ibik_pin.app.job import TrackJob
 from ibik_pin.app.options import as_options
-from ibik_pin.app.outdir import check_outdir, make_staging, publish
+from ibik_pin.app.outdir import check_outdir, kept_message, make_staging, overlay_file_names, publish
 from ibik_pin.app.outputs import write_outputs
 from ibik_pin.app.report import TrackingReport
 from ibik_pin.app.silhouette_files import load_silhouettes
@@ -123,15 +123,20 @@ def run_track(job: TrackJob) -> TrackingReport:
     """Run the whole job; returns the report that was written to OUTDIR/report.json.
 
     OUTDIR is checked first (app.outdir), and the outputs go to a staging folder made before
-    any work, so that an OUTDIR that cannot be written is found at once."""
+    any work, so that an OUTDIR that cannot be written is found at once. An earlier output's files
+    that ibik did not write (not in its manifest) are kept, and a warning says so."""
+    if not isinstance(job, TrackJob):
+        raise InputError(f"run_track: expected a TrackJob (ibik_pin.app.job), found {type(job).__name__}")
     out = check_outdir(job.out, job.inputs)
     staging = make_staging(out)
     try:
         report = _run_into(staging, job)
-        publish(staging, out)
+        kept = publish(staging, out)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
+    if kept:
+        warnings.warn(kept_message(out, kept), IbikWarning, stacklevel=2)
     return report
 
 
@@ -143,6 +148,15 @@ def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
         if job.cameras:
             with as_options({"names": "--cameras"}):
                 cameras = select_cameras(cameras, job.cameras)
+        if job.overlay:  # said now, not after the solve: a camera's name names its overlay video
+            renamed = {name: file for name, file in overlay_file_names([c.name for c in cameras]).items()
+                       if file != f"overlay_{name}.mp4"}
+            if renamed:
+                name, file = next(iter(renamed.items()))
+                warnings.warn(f"--calibration {job.calibration}: camera {name!r} cannot name a file as it is; "
+                              f"its overlay video is {file}" + (f" ({len(renamed) - 1} more renamed so)"
+                                                                if len(renamed) > 1 else ""),
+                              IbikWarning, stacklevel=2)
     # Without --targets the videos' keypoints are triangulated into staging and read back as targets.
     videos = read_videos(staging, job, cameras)
     cameras = videos.cameras
