@@ -37,7 +37,7 @@ def read_summary(out: Path) -> dict[str, dict[str, str]]:
 
 def output_times(out: Path) -> dict[str, int]:
     return {str(path.relative_to(out)): path.stat().st_mtime_ns for path in sorted(out.rglob("*"))
-            if path.is_file() and path.name not in ("summary.csv", "summary.parquet")}
+            if path.is_file() and path.name not in ("summary.csv", "summary.parquet", "runs.csv")}
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,9 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import uuid
 from collections.abc import Callable, Sequence
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -38,7 +40,9 @@ def add_batch_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, required=True,
                         help="OUTROOT: each trial's outputs go to OUTROOT/<its path under ROOT>, the "
                              "participants' calibrated models to OUTROOT/<participant>/subject.urdf, "
-                             "the table of all trials to OUTROOT/summary.csv (and .parquet with pyarrow)")
+                             "the table of all trials to OUTROOT/summary.csv (and .parquet with pyarrow), every "
+                             "run's rows appended to OUTROOT/runs.csv; a new or empty folder, or an "
+                             "earlier batch's, outside ROOT")
     parser.add_argument("--targets", default="*.trc", metavar="PATTERN",
                         help="file name pattern of a trial's targets TRC, in the trial's folder or its "
                              "pose-3d/ (default: *.trc; files named *static* are static trials)")
@@ -67,9 +71,10 @@ def run_batch_command(arguments: argparse.Namespace, make_job: Callable[[argpars
     require_dask()
     from tqdm import tqdm
 
+    from ibik_pin.app.batch.bookkeeping import check_outroot, claim_outroot, remove_leftovers
     from ibik_pin.app.batch.discovery import find_trials
     from ibik_pin.app.batch.runner import SubjectTask, TrialTask, dask_client, run_on_dask
-    from ibik_pin.app.batch.summary import TrialOutcome, write_summary
+    from ibik_pin.app.batch.summary import TrialOutcome, append_runs_log, earlier_records, write_summary
     from ibik_pin.app.batch.tasks import completed_outcome
     from ibik_pin.exceptions import InputError
 
@@ -80,13 +85,14 @@ def run_batch_command(arguments: argparse.Namespace, make_job: Callable[[argpars
     make_job(arguments)  # the track options are checked once, before any trial (its paths are placeholders)
     if not root.is_dir():
         raise InputError(f"ROOT {arguments.root}: not a folder")
-    if outroot == root:
-        raise InputError(f"--out {arguments.out}: must not be ROOT (the outputs would replace the trials)")
+    check_outroot(root, outroot, str(arguments.out))
     trials = find_trials(root, arguments.targets, exclude=outroot)
     if not trials:
         raise InputError(f"ROOT {arguments.root}: no trial found (a folder holding a TRC matching "
                          f"{arguments.targets!r}, itself or in pose-3d/)")
     model = Path(arguments.model).resolve() if arguments.model is not None else None
+    run = f"{datetime.now(timezone.utc):%Y-%m-%dT%H:%M:%SZ}-{uuid.uuid4().hex[:6]}"  # this run's id in runs.csv
+    earlier = earlier_records(outroot)
 
     outcomes: list[TrialOutcome] = []
     tasks = []
@@ -101,8 +107,12 @@ def run_batch_command(arguments: argparse.Namespace, make_job: Callable[[argpars
         if trial.problem is not None:
             outcomes.append(TrialOutcome(name, "failed", subject=label, error=trial.problem))
             continue
+        remove_leftovers(out)  # a killed worker's staging folder, a publish cut short
         done = completed_outcome(name, out, arguments.overlay, label)
         if done is not None:
+            record = earlier.get(name, {})  # the run that tracked it: its worker, time and id
+            done.worker, done.tracked_in = record.get("worker", ""), record.get("batch_run", "")
+            done.seconds = float(record["seconds"]) if record.get("seconds") else None
             outcomes.append(done)
             continue
         job_arguments = argparse.Namespace(**{
@@ -111,7 +121,7 @@ def run_batch_command(arguments: argparse.Namespace, make_job: Callable[[argpars
             "out": out, "quiet": True, "read_ahead": "off"})  # a worker per core: one thread each
         tasks.append(TrialTask(name, make_job(job_arguments), subject))
 
-    outroot.mkdir(parents=True, exist_ok=True)
+    claim_outroot(outroot, root)
     with tqdm(total=len(trials), initial=len(outcomes), desc="trials", unit="trial",
               disable=True if arguments.quiet else None) as bar:
         failures = [sum(outcome.status == "failed" for outcome in outcomes)]
@@ -125,7 +135,10 @@ def run_batch_command(arguments: argparse.Namespace, make_job: Callable[[argpars
             workers = arguments.workers or os.cpu_count() or 1
             with dask_client(arguments.scheduler, workers) as client:
                 outcomes += run_on_dask(client, tasks, outroot, count)
-    written = write_summary(outroot, outcomes)
+    for outcome in outcomes:
+        if outcome.status != "skipped":
+            outcome.tracked_in = run
+    written = write_summary(outroot, outcomes) + [append_runs_log(outroot, run, outcomes)]
     failed = [outcome for outcome in outcomes if outcome.status == "failed"]
     for outcome in sorted(failed, key=lambda o: o.trial):
         print(f"ibik: trial {outcome.trial} failed: {outcome.error}", file=sys.stderr)

@@ -13,6 +13,7 @@ import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from ibik_pin.app.batch.bookkeeping import missing_outputs
 from ibik_pin.app.batch.summary import TrialOutcome, outcome_from_report
 from ibik_pin.app.job import TrackJob
 from ibik_pin.app.track import run_track
@@ -27,7 +28,7 @@ __all__ = ["OUTPUT_FILES", "SubjectOutcome", "calibrate_subject_once", "complete
 
 # What run_track writes into OUTDIR (app.outputs.write_outputs); with --overlay, also these
 # and one overlay video per camera.
-OUTPUT_FILES = ("joints.trc", "q.csv", "motion.mot", "motion.bvh", "report.json")
+OUTPUT_FILES = ("joints.trc", "q.csv", "motion.mot", "motion.bvh", "model.osim", "report.json")
 OVERLAY_FILES = ("residuals.png", "replay.html")
 
 
@@ -105,9 +106,11 @@ def _joined(caught: list[warnings.WarningMessage]) -> str:
 
 
 def completed_outcome(name: str, out: Path, overlay: bool, subject: str) -> TrialOutcome | None:
-    """The row of a trial whose outputs in `out` are complete (an earlier run), else None."""
+    """The row of a trial whose outputs in `out` are complete (an earlier run), else None: every
+    output the batch expects listed in OUTDIR's manifest, every listed file there with its size
+    (batch.bookkeeping.missing_outputs), and report.json readable."""
     expected = OUTPUT_FILES + (OVERLAY_FILES if overlay else ())
-    if not all((out / file).is_file() for file in expected):
+    if missing_outputs(out, expected) is not None:
         return None
     try:
         report = json.loads((out / "report.json").read_text())
