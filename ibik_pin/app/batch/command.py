@@ -89,7 +89,7 @@ def run_batch_command(arguments: argparse.Namespace, make_job: Callable[[argpars
     trials = find_trials(root, arguments.targets, exclude=outroot)
     if not trials:
         raise InputError(f"ROOT {arguments.root}: no trial found (a folder holding a TRC matching "
-                         f"{arguments.targets!r}, itself or in pose-3d/)")
+                         f"{arguments.targets!r}, itself or in pose-3d/, or a videos/ folder of videos)")
     model = Path(arguments.model).resolve() if arguments.model is not None else None
     run = f"{datetime.now(timezone.utc):%Y-%m-%dT%H:%M:%SZ}-{uuid.uuid4().hex[:6]}"  # this run's id in runs.csv
     earlier = earlier_records(outroot)

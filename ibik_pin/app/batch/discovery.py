@@ -2,8 +2,10 @@
 
 Layout (Pose2Sim's, with what `ibik track` needs)::
 
-    ROOT/.../calibration/Calib*.toml       the cameras: the nearest calib*.toml in the trial's folder,
-                                           its calibration/ sub-folder, or the same in a parent
+    ROOT/.../calibration/Calib*            the cameras: the nearest calibration in the trial's folder,
+                                           its calibration/ sub-folder, or the same in a parent (any
+                                           format io.calibration reads: Pose2Sim or Anipose TOML,
+                                           Qualisys .qca.txt, EasyMocap intri.yml + extri.yml)
     ROOT/.../PARTICIPANT/subject.urdf      a calibrated model (`ibik calibrate`), or
     ROOT/.../PARTICIPANT/*static*/x.trc    a static trial, calibrated once for all the participant's trials
     ROOT/.../PARTICIPANT/TRIAL/x.trc       the targets (or TRIAL/pose-3d/x.trc), and
@@ -11,8 +13,13 @@ Layout (Pose2Sim's, with what `ibik track` needs)::
     ROOT/.../PARTICIPANT/TRIAL/videos/     one video per camera (and background/ frames, if any)
 
 A trial is a folder, not a static one, that holds a TRC matching the targets pattern (itself or in
-pose-3d/); its participant's folder is its parent. Anything ambiguous (two TRC files, two
-calibrations) is the trial's problem, recorded for that trial alone.
+pose-3d/), or a videos/ folder of videos (then, without a TRC, the targets are triangulated from
+the videos, as `ibik track --videos --calibration` without --targets does); its participant's
+folder is its parent. ROOT itself may be the trial (a Pose2Sim project of one trial): it is then
+named after ROOT's folder. A calibration is a file named calib* (TOML, .qca.txt, YAML), or any
+file of calibration/ that io.calibration reads; where a folder holds several, its one TOML is taken
+(Pose2Sim keeps the Qualisys file it converted beside its TOML). Anything ambiguous (two TRC files,
+two calibrations) is the trial's problem, recorded for that trial alone.
 """
 
 from __future__ import annotations
@@ -24,6 +31,8 @@ from pathlib import Path
 __all__ = ["Subject", "Trial", "find_trials"]
 
 TARGET_FOLDERS = ("", "pose-3d")  # where a trial's TRC may be: the trial's folder or Pose2Sim's pose-3d/
+CALIBRATION_SUFFIXES = (".toml", ".txt", ".yml", ".yaml")
+VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v")  # as app.silhouette_files reads them
 
 
 @dataclass(frozen=True)
@@ -84,10 +93,37 @@ def _trc_files(folder: Path, pattern: str) -> list[Path]:
     return found
 
 
+def _reads_as_calibration(path: Path) -> bool:
+    from ibik_pin.exceptions import IbikError
+    from ibik_pin.io.calibration import read_calibration
+
+    try:
+        return bool(read_calibration(path))
+    except (IbikError, OSError, ValueError):
+        return False
+
+
 def _calibrations_in(folder: Path) -> list[Path]:
-    places = [folder] + [p for p in [_child(folder, "calibration")] if p is not None]
-    return [p for place in places for p in sorted(place.iterdir())
-            if p.is_file() and p.suffix.lower() == ".toml" and p.name.lower().startswith("calib")]
+    """The calibrations of a folder and its calibration/ sub-folder (see the module docstring)."""
+    sub = _child(folder, "calibration")
+    found = []
+    for place in [folder] + ([sub] if sub is not None else []):
+        files = [p for p in sorted(place.iterdir()) if p.is_file() and p.suffix.lower() in CALIBRATION_SUFFIXES]
+        names = {p.name.lower() for p in files}
+        for path in files:
+            name = path.name.lower()
+            if name == "extri.yml" and "intri.yml" in names:
+                continue  # EasyMocap's pair is one calibration, read from either file
+            if name.startswith("calib") or (place == sub and _reads_as_calibration(path)):
+                found.append(path)
+    tomls = [path for path in found if path.suffix.lower() == ".toml"]
+    return tomls if len(found) > 1 and len(tomls) == 1 else found
+
+
+def _has_videos(folder: Path) -> bool:
+    """Whether a videos/ folder holds a video, directly or in a camera's sub-folder."""
+    return any(path.suffix.lower() in VIDEO_SUFFIXES and path.is_file()
+               for place in [folder, *(p for p in folder.iterdir() if p.is_dir())] for path in place.iterdir())
 
 
 def _nearest_calibration(trial: Path, root: Path) -> tuple[Path | None, str | None]:
@@ -136,7 +172,8 @@ def find_trials(root: Path, pattern: str = "*.trc", exclude: Path | None = None)
         if folder == exclude:
             continue
         targets = [path for path in _trc_files(folder, pattern) if not _is_static(path.name)]
-        if not targets:
+        masks, videos = _child(folder, "masks"), _child(folder, "videos")
+        if not targets and not (videos is not None and _has_videos(videos)):
             continue
         folders[:] = []  # a trial holds no other trial
         problems = []
@@ -144,11 +181,14 @@ def find_trials(root: Path, pattern: str = "*.trc", exclude: Path | None = None)
             problems.append(f"several TRC files match {pattern!r}: {', '.join(str(p) for p in targets)} "
                             "(choose one with --targets PATTERN)")
         calibration, problem = _nearest_calibration(folder, root)
+        if not targets and calibration is None and problem is None:
+            problem = (f"no calibration found for the videos in {videos} (a calib* file or a calibration/ "
+                       f"folder, in the trial's folder or above it up to ROOT) and no TRC matching {pattern!r}")
         subject, subject_problem = _subject(folder.parent if folder != root else root, root, pattern)
-        masks, videos = _child(folder, "masks"), _child(folder, "videos")
         problems += [p for p in (problem, subject_problem) if p]
         trials.append(Trial(
-            name=folder.relative_to(root), targets=targets[0] if len(targets) == 1 else None,
+            name=folder.relative_to(root) if folder != root else Path(root.name),
+            targets=targets[0] if len(targets) == 1 else None,
             calibration=calibration, masks=masks, videos=None if masks is not None else videos,
             background=_child(folder, "background") if masks is None and videos is not None else None,
             subject=subject, problem="; ".join(problems) or None,
