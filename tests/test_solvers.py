@@ -655,6 +655,25 @@ def test_a_solve_stopped_at_the_peak_is_the_counted_solve_cut_at_its_best_step(s
     assert heights[-1] <= heights[-2]
 
 
+@pytest.mark.parametrize("solver_name", ["liegeois", "stack", "qp"])
+def test_a_solve_stopped_at_the_peak_computes_no_step_past_it(solver_name):
+    """The criterion is read before the next step is computed, so a solve stopped at the peak
+    computes the steps it keeps and the one it undoes, and none beyond (the criterion's fall used
+    to be read off one more whole step: its levels' rows and QPs)."""
+    body = load_arm()
+    start = np.array([0.3, 0.4, 0.2, 0.9, 0.1, 0.5])
+    wrist = FramePositionTask(body.model, body.keypoints["Wrist"])
+    wrist.set_target(Configuration(body.model, start).frame_position(body.frame_id("Wrist")).copy())
+    levels = [[wrist], [FrameHeight(body, "Elbow", max_step_size=0.3)]]
+    solver = make_solver(solver_name, limits=JointLimits(body.model))
+    computed = []
+    step = solver.compute_step
+    solver.compute_step = lambda *arguments: computed.append(1) or step(*arguments)  # type: ignore[method-assign]
+    result = solver.solve(Configuration(body.model, start), levels, iterations=40, stop_at_peak=True)
+    assert 2 <= result.iterations < 40
+    assert len(computed) == result.iterations + 1
+
+
 @pytest.mark.parametrize("solver_name", ["stack", "qp"])
 def test_stopping_at_the_peak_changes_nothing_without_a_gradient_level(human, solver_name):
     rng = np.random.default_rng(5)

@@ -308,19 +308,22 @@ class Solver(ABC):
         step_norms: list[float] = []
         step = StepResult(np.zeros(configuration.nv), [])
         plan = LevelPlan.of(self.arrange(levels))  # the same for every step of this solve
-        # With stop_at_peak: q before the last step, the criterion there, and the step before it
-        # (whose reports the solve returns if the last is undone).
-        previous_q, previous_value, previous_step = configuration.q, float("nan"), step
+        # With stop_at_peak: q before the last step and the criterion there; `taken`, the step
+        # before the last (whose reports the solve returns if the last is undone).
+        previous_q, previous_value, taken = configuration.q, float("nan"), step
+        # The criterion alone, to judge the last step before the next is computed (the same value
+        # the step would report): the step past the peak costs no QP. None: no gradient level.
+        criterion = plan.entries[plan.criterion_level] if stop_at_peak and plan.criterion_level is not None else None
         for index in range(int(iterations)):
+            if criterion is not None and index >= 2 and criterion.compute_value(configuration) <= previous_value:
+                # h after `index` steps is not above h after the step before; NaN never stops.
+                configuration.update(previous_q)  # the last step undone
+                step_norms.pop()
+                step = taken
+                break
             taken, step = step, self.compute_step(configuration, levels, plan)
             if stop_at_peak:
-                # step.criterion is h after `index` steps; NaN (no gradient level) never stops.
-                if index >= 2 and step.criterion <= previous_value:
-                    configuration.update(previous_q)  # the last step undone
-                    step_norms.pop()
-                    step = previous_step
-                    break
-                previous_q, previous_value, previous_step = configuration.q.copy(), step.criterion, taken
+                previous_q, previous_value = configuration.q.copy(), step.criterion
             configuration.move(step.dq, self.limits)
             step_norms.append(vector_norm(step.dq))
             if tolerance is not None and step_norms[-1] < tolerance:
