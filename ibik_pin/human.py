@@ -17,7 +17,7 @@ import pinocchio as pin
 
 from ibik_pin.exceptions import FileFormatError, InputError
 from ibik_pin.feet import add_foot_rotation
-from ibik_pin.io.files import checked_input_file
+from ibik_pin.io.files import as_path, checked_input_file
 from ibik_pin.model import BodyModel, add_keypoint_frame, built_from_urdf
 
 HUMAN_URDF_RELATIVE = Path("example-robot-data/robots/human_description/robots/human.urdf")
@@ -130,7 +130,7 @@ def load_human(urdf_path: str | Path | None = None, free_flyer: bool = True) -> 
         urdf_path: another URDF with the same joint names; default the installed human.urdf.
         free_flyer: add the 6-DOF floating base (45 coordinates, 44 velocities).
     """
-    path = Path(urdf_path) if urdf_path is not None else human_urdf_path()
+    path = as_path(urdf_path, "urdf_path") if urdf_path is not None else human_urdf_path()
     xml = ElementTree.tostring(human_urdf_tree(path).getroot(), encoding="unicode")
     model = built_from_urdf(path, lambda: pin.buildModelFromXML(xml, pin.JointModelFreeFlyer()) if free_flyer
                              else pin.buildModelFromXML(xml))

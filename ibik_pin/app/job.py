@@ -86,6 +86,20 @@ class TrackJob:
                 if not isinstance(value, (str, os.PathLike)):
                     raise InputError(f"TrackJob.{name}: expected a path (str or Path), found {type(value).__name__}")
                 object.__setattr__(self, name, Path(value))  # frozen: converted once, here
+        if not isinstance(self.settings, TrackingSettings):
+            raise InputError(f"TrackJob.settings: expected a TrackingSettings (ibik_pin.tracking.settings), found "
+                             f"{type(self.settings).__name__}; e.g. TrackingSettings(iterations=3)")
+        for name in ("cameras", "refit_cameras"):
+            names = getattr(self, name)
+            if names is not None and (isinstance(names, str) or not isinstance(names, (list, tuple))
+                                      or not all(isinstance(item, str) for item in names)):
+                raise InputError(f"TrackJob.{name}: expected a list of camera names, found {names!r}")
+        for name in ("overlay", "quiet", "triangulated_limbs"):
+            if not isinstance(getattr(self, name), bool):
+                raise InputError(f"TrackJob.{name}: expected True or False, found {getattr(self, name)!r}")
+        for name in ("trc_axes", "segmenter", "trial_lengths"):
+            if not isinstance(getattr(self, name), str):
+                raise InputError(f"TrackJob.{name}: expected a name (str), found {getattr(self, name)!r}")
         if self.masks is not None and self.videos is not None:
             raise InputError("--masks and --videos: give one source of silhouettes, not both")
         if self.background is not None and self.videos is None:

@@ -75,7 +75,8 @@ def _starts_with_camera(stem: str, name: str) -> bool:
 def camera_folder_entries(folder: Path, names: list[str], kind: str) -> dict[str, Path]:
     """Per camera, its mask sub-folder (--masks) or its video (--videos) in `folder`.
 
-    A sub-folder or a video's file name (without its suffix) is the camera's whole name; case and
+    A sub-folder or a video's file name (without its suffix) is the camera's whole name (for
+    --videos, a sub-folder holding one video stands for that video); case and
     separators are ignored, so Pose2Sim's cam01.mp4 serves the calibration's cam_01, and cam1 never
     reads cam10.mp4. A camera with no entry, or with several, is an error listing them.
     """
@@ -84,12 +85,14 @@ def camera_folder_entries(folder: Path, names: list[str], kind: str) -> dict[str
     if kind == "masks":
         candidates = [p for p in sorted(folder.iterdir()) if p.is_dir()]
         what = "sub-folder"
-    else:
+    else:  # a camera's video, or its sub-folder holding one video (Pose2Sim's per-camera folders)
         candidates = [p for p in sorted(folder.iterdir()) if p.suffix.lower() in VIDEO_SUFFIXES and p.is_file()]
+        candidates += [p for p in sorted(folder.iterdir()) if p.is_dir() and len(_videos_in(p)) == 1]
         what = "video"
     found: dict[str, Path] = {}
     for name in names:
-        matches = [p for p in candidates if _plain(p.stem if kind != "masks" else p.name) == _plain(name)]
+        matches = [p for p in candidates if _plain(p.stem if kind != "masks" and p.is_file() else p.name)
+                   == _plain(name)]
         if not matches:
             listed = ", ".join(p.name for p in candidates[:8]) or "none"
             raise FileFormatError(f"--{kind} {folder}: no {what} named after camera {name!r} (case and separators "
@@ -97,8 +100,12 @@ def camera_folder_entries(folder: Path, names: list[str], kind: str) -> dict[str
         if len(matches) > 1:
             raise FileFormatError(f"--{kind} {folder}: camera {name!r} matches several entries: "
                                   f"{', '.join(p.name for p in matches)}; keep one")
-        found[name] = matches[0]
+        found[name] = matches[0] if kind == "masks" or matches[0].is_file() else _videos_in(matches[0])[0]
     return found
+
+
+def _videos_in(folder: Path) -> list[Path]:
+    return [p for p in sorted(folder.iterdir()) if p.suffix.lower() in VIDEO_SUFFIXES and p.is_file()]
 
 
 def check_video_size(path: Path, camera) -> tuple[int, int]:

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from ibik_pin.exceptions import FileFormatError, InputError, UnknownNameError
-from ibik_pin.io.files import PathLike
+from ibik_pin.io.files import PathLike, as_path
 from ibik_pin.io.trc import METRES_PER_UNIT, TrcData
 
 if sys.version_info >= (3, 11):
@@ -80,7 +80,7 @@ def _import_ezc3d():
 def is_c3d(path: PathLike) -> bool:
     """Whether a regular file starts as a C3D file does (its second byte is 0x50), whatever its
     suffix. A pipe or device is none: reading it could block, and the TRC reader names it."""
-    if not Path(path).is_file():
+    if not as_path(path).is_file():
         return False
     try:
         with open(path, "rb") as file:

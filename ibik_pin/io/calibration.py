@@ -20,7 +20,7 @@ import tomli_w
 from ibik_pin.checks import as_finite_array, as_image_size
 from ibik_pin.exceptions import FileFormatError, InputError
 from ibik_pin.io.calibration_formats import read_easymocap, read_qualisys
-from ibik_pin.io.files import PathLike, read_text, write_text_atomically
+from ibik_pin.io.files import PathLike, as_path, read_text, write_text_atomically
 from ibik_pin.vision.pinhole import PinholeCamera
 
 if sys.version_info >= (3, 11):
@@ -59,7 +59,7 @@ def read_calibration(path: PathLike) -> list[PinholeCamera]:
             wrong shape or is not finite, ``fisheye = true`` (not supported), two cameras share
             a name, or no camera section; the message names the file, section and key.
     """
-    path = Path(path)
+    path = as_path(path)
     if path.is_dir():
         return read_easymocap(path)
     text = read_text(path, "calibration")  # a byte-order mark, which tomllib refuses, is dropped
@@ -155,7 +155,7 @@ def write_calibration(path: PathLike, cameras: Sequence[PinholeCamera]) -> None:
         InputError: a camera is not a :class:`PinholeCamera`, or names repeat or are reserved.
         OSError: the file cannot be written.
     """
-    path = Path(path)
+    path = as_path(path)
     document: dict[str, dict] = {}
     for index, camera in enumerate(cameras):
         if not isinstance(camera, PinholeCamera):

@@ -28,6 +28,7 @@ from ibik_pin.exceptions import (
 
 __all__ = [
     "PathLike",
+    "as_path",
     "check_declared_count",
     "is_number",
     "json_ready",
@@ -50,14 +51,32 @@ _Result = TypeVar("_Result")
 MAX_INPUT_BYTES = 1 << 30
 
 
+def as_path(value: object, parameter: str = "path") -> Path:
+    """`value` as a Path: a str or os.PathLike naming something (the check every reader and writer
+    makes of its path argument).
+
+    Raises:
+        InputError: another type (a number, bytes, None, an array), or an empty name.
+    """
+    if isinstance(value, (str, os.PathLike)):
+        text = os.fspath(value)
+        if isinstance(text, str) and text.strip():
+            return Path(text)
+        if isinstance(text, str):
+            raise InputError(f"{parameter}: expected a path, found an empty name {text!r}", parameter=parameter)
+    raise InputError(f"{parameter}: expected a path (str or pathlib.Path), found {type(value).__name__} "
+                     f"{value!r:.60}", parameter=parameter)
+
+
 def checked_input_file(path: str | os.PathLike[str], what: str) -> Path:
     """The path, once it is known to be a regular file of at most MAX_INPUT_BYTES.
 
     Raises:
+        InputError: `path` is not a path (as_path).
         FileFormatError: it does not exist, is a folder, a FIFO or device (reading one could block
             or never end), or is larger than the limit.
     """
-    path = Path(path)
+    path = as_path(path)
     try:
         status = path.stat()
     except OSError as error:

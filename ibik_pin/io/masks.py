@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 
 from ibik_pin.exceptions import FileFormatError, InputError
-from ibik_pin.io.files import PathLike
+from ibik_pin.io.files import PathLike, as_path
 from ibik_pin.io.png import decode_grey_png
 from ibik_pin.native_output import captured_native_stderr
 
@@ -127,7 +127,7 @@ def decode_mask(image: np.ndarray, where: str = "mask") -> tuple[np.ndarray, str
 
 def _read_decoded(path: PathLike, expected_size: object) -> tuple[np.ndarray, str]:
     size = _check_expected_size(expected_size)
-    path = Path(path)
+    path = as_path(path)
     where = f"mask file '{path}'"
     image = read_image(path, cv2.IMREAD_UNCHANGED, "mask")
     found = (image.shape[1], image.shape[0])
@@ -172,7 +172,7 @@ def list_mask_files(folder: PathLike) -> list[Path]:
     Raises:
         FileFormatError: the folder does not exist or holds no image file.
     """
-    folder = Path(folder)
+    folder = as_path(folder, "folder")
     if not folder.is_dir():
         raise FileFormatError(f"mask folder '{folder}': expected a directory, found none")
     files = [path for path in folder.iterdir() if path.is_file() and path.suffix.lower() in IMAGE_SUFFIXES]

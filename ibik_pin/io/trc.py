@@ -261,6 +261,8 @@ def write_trc(path: str | os.PathLike[str], data: TrcData) -> None:
     Raises:
         InputError: The file cannot be written.
     """
+    if not isinstance(data, TrcData):
+        raise InputError(f"data: expected a TrcData (ibik_pin.io.trc), found {type(data).__name__}", parameter="data")
     marker_count = len(data.marker_names)
     frame_count = data.times.shape[0]
     camera_rate = data.data_rate if data.camera_rate is None else data.camera_rate

@@ -5,13 +5,12 @@ and a generator of frames for a single pass.
 from __future__ import annotations
 
 from collections.abc import Iterator
-from pathlib import Path
 
 import cv2
 import numpy as np
 
 from ibik_pin.exceptions import FileFormatError, InputError
-from ibik_pin.io.files import PathLike
+from ibik_pin.io.files import PathLike, as_path
 from ibik_pin.native_output import captured_native_stderr
 
 __all__ = ["VideoReader", "read_frames"]
@@ -32,7 +31,7 @@ class VideoReader:
     """
 
     def __init__(self, path: PathLike) -> None:
-        self.path = Path(path)
+        self.path = as_path(path)
         if not self.path.is_file():
             raise FileFormatError(f"video file '{self.path}': expected a readable video, found no such file")
         self._capture: cv2.VideoCapture | None = self._open()

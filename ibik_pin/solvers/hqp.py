@@ -40,6 +40,7 @@ from ibik_pin.solvers.base import (
     report_levels,
 )
 from ibik_pin.solvers.level_loop import StepWorkspace
+from ibik_pin.solvers.level_types import checked_levels
 from ibik_pin.solvers.qp_backends import FEASIBILITY, UNBOUNDED, LevelProblem, make_qp_backend
 
 DEFAULT_QP_SOLVER = "active_set"
@@ -84,6 +85,9 @@ class HierarchicalQPSolver(Solver):
         self.backend = make_qp_backend(qp_solver, accuracy=accuracy, max_iterations=max_qp_iterations)
         self.raise_on_failure = bool(raise_on_failure)
         self._workspace = StepWorkspace()
+
+    def arrange(self, levels: Levels) -> Levels:
+        return checked_levels(levels)
 
     def compute_step(self, configuration: Configuration, levels: Levels, plan: LevelPlan | None = None) -> StepResult:
         return self._step(configuration, levels, plan, None)

@@ -32,6 +32,7 @@ from ibik_pin.solvers.base import (
     report_levels,
 )
 from ibik_pin.solvers.level_loop import PackedLevels, StepWorkspace
+from ibik_pin.solvers.level_types import checked_levels
 from ibik_pin.tasks.base import GradientTask, Task
 
 
@@ -45,6 +46,9 @@ class PriorityStackSolver(Solver):
     def __init__(self, *, limits: JointLimits | None = None, damping: float = DEFAULT_DAMPING) -> None:
         super().__init__(limits=limits, damping=damping)
         self._workspace = StepWorkspace()
+
+    def arrange(self, levels: Levels) -> Levels:
+        return checked_levels(levels)
 
     def compute_step(self, configuration: Configuration, levels: Levels, plan: LevelPlan | None = None) -> StepResult:
         planned = plan or LevelPlan.of(self.arrange(levels))
@@ -106,7 +110,8 @@ class LiegeoisSolver(PriorityStackSolver):
     name = "liegeois"
 
     def arrange(self, levels: Levels) -> Levels:
-        return _merge_least_squares(levels) + _first_gradient_level(levels)
+        checked = checked_levels(levels)
+        return _merge_least_squares(checked) + _first_gradient_level(checked)
 
 
 class DampedLeastSquaresSolver(PriorityStackSolver):
@@ -116,4 +121,4 @@ class DampedLeastSquaresSolver(PriorityStackSolver):
     name = "ik"
 
     def arrange(self, levels: Levels) -> Levels:
-        return _merge_least_squares(levels)
+        return _merge_least_squares(checked_levels(levels))

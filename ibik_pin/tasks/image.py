@@ -43,13 +43,22 @@ class View:
             that is not `enabled` (an empty silhouette) is skipped.
 
     Raises:
-        InputError: the support image's size is not the camera's.
+        InputError: the camera or the support image is not one (a bare mask array as the support),
+            or the support image's size is not the camera's.
     """
 
     camera: CameraLike
     support: SupportImageLike
 
     def __post_init__(self) -> None:
+        for what, value, needed, hint in (
+                ("camera", self.camera, ("name", "size", "project"), "a camera of ibik_pin.vision (PinholeCamera)"),
+                ("support", self.support, ("size", "enabled", "sample"),
+                 "a support image: vision.support.support_from_mask(mask) for a silhouette")):
+            missing = [name for name in needed if not hasattr(value, name)]
+            if missing:
+                raise InputError(f"View.{what}: expected {hint}, found {type(value).__name__} (it has no "
+                                 f"{missing[0]!r})")
         support_size = tuple(self.support.size)
         camera_size = tuple(self.camera.size)
         if support_size != camera_size:

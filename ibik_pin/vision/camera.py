@@ -84,7 +84,11 @@ def _read_only(array: np.ndarray) -> np.ndarray:
 
 def _as_points(points_world, name: str = "points_world") -> np.ndarray:
     """(N, 3) float64 view of the points; non-finite values propagate to the result."""
-    points = np.asarray(points_world, dtype=np.float64)
+    try:
+        points = np.asarray(points_world, dtype=np.float64)
+    except (TypeError, ValueError) as error:
+        raise InputError(f"{name}: expected an array of shape (N, 3) [m], found {type(points_world).__name__} "
+                         f"({error})", parameter=name) from None
     if points.ndim != 2 or points.shape[1] != 3:
         raise InputError(f"{name}: expected an array of shape (N, 3) [m], found shape {points.shape}")
     return points
@@ -261,6 +265,9 @@ def select_cameras(cameras: Sequence[Camera], names: Sequence[str]) -> list[Came
         UnknownNameError: a name is not among the cameras; the message lists the available ones.
         InputError: a name is requested twice.
     """
+    if isinstance(cameras, (str, bytes)) or not all(hasattr(camera, "name") for camera in cameras):
+        raise InputError(f"cameras: expected a list of cameras (ibik_pin.vision), found {cameras!r:.60}",
+                         parameter="cameras")
     by_name = {camera.name: camera for camera in cameras}
     if isinstance(names, str):
         raise InputError(f"names: expected a list of camera names, found the string {names!r}", parameter="names")
