@@ -8,7 +8,7 @@ from ibik_pin.exceptions import InputError
 from ibik_pin.tasks import ImageTask, View
 from ibik_pin.tasks.segments import SegmentCriterion
 from ibik_pin.tasks.silhouette_axis import AxisView, SilhouetteAxisTask
-from ibik_pin.tracking.swivel import SwivelSearch, swivel_circle
+from ibik_pin.tracking.swivel import SwivelSearch, inside_trunk, swivel_circle
 from ibik_pin.vision.medial_axis import medial_axis_pixels
 from ibik_pin.vision.pinhole import look_at_camera
 from ibik_pin.vision.render import render_capsules
@@ -60,7 +60,7 @@ def test_the_search_hints_the_elbow_back_toward_the_pose_of_the_silhouette(human
 
     true_q = pin.neutral(human.model)
     # Left arm raised sideways and bent: an elbow far from the trunk in both views.
-    for joint, angle in [("left_shoulder_X", -1.2), ("left_elbow_Z", 1.3)]:
+    for joint, angle in [("left_shoulder_X", 1.2), ("left_elbow_Z", 1.3)]:
         true_q[human.model.joints[human.model.getJointId(joint)].idx_q] = angle
     image_views, axis_views = _views(human, true_q)
     image = ImageTask(human, image_views)
@@ -140,7 +140,7 @@ def test_a_hint_needs_every_term_to_agree(human):
     import pinocchio as pin
 
     q = pin.neutral(human.model)
-    for joint, angle in [("left_shoulder_X", -1.2), ("left_elbow_Z", 1.3)]:
+    for joint, angle in [("left_shoulder_X", 1.2), ("left_elbow_Z", 1.3)]:
         q[human.model.joints[human.model.getJointId(joint)].idx_q] = angle
     configuration = Configuration(human.model, q)
     shoulder, elbow, wrist = configuration.frame_positions(human.frame_ids(["LShoulder", "LElbow", "LWrist"]))
@@ -266,7 +266,7 @@ def test_the_second_pass_brings_a_coarse_hint_closer_to_the_pose_of_the_silhouet
     import pinocchio as pin
 
     true_q = pin.neutral(human.model)
-    for joint, angle in [("left_shoulder_X", -1.2), ("left_elbow_Z", 1.3)]:
+    for joint, angle in [("left_shoulder_X", 1.2), ("left_elbow_Z", 1.3)]:
         true_q[human.model.joints[human.model.getJointId(joint)].idx_q] = angle
     image_views, axis_views = _views(human, true_q)
     terms = [(ImageTask(human, image_views), 1.0), (SilhouetteAxisTask(human, axis_views), 1.0)]
@@ -289,3 +289,42 @@ def test_the_second_pass_brings_a_coarse_hint_closer_to_the_pose_of_the_silhouet
     assert np.linalg.norm(refined - truth) < 0.5 * np.linalg.norm(coarse - truth)  # 3 mm here
     with pytest.raises(InputError, match="refine"):
         SwivelSearch(human, terms, refine=-1)
+
+
+def test_the_trunk_section_holds_true_poses_outside_and_an_arm_laid_across_the_chest_inside():
+    hip, neck = np.zeros(3), np.array([0.0, 0.5, 0.0])
+    left, right = np.array([0.0, 0.35, -0.19]), np.array([0.0, 0.35, 0.19])  # facing +x, Y up
+    points = np.array([[0.0, 0.2, 0.0],  # the trunk's centre
+                       [0.0, 0.2, -0.19],  # below the left shoulder, arm hanging
+                       [0.13, 0.2, 0.0],  # in front of the chest, an arm's radius off a 0.1-m half depth
+                       [0.05, 0.2, -0.1],  # within the trunk's front half
+                       [0.0, -0.05, 0.0],  # below the pelvis centre
+                       [0.0, 0.55, 0.0]])  # above the neck
+    inside = inside_trunk(points, hip, neck, left, right)
+    np.testing.assert_array_equal(inside, [True, False, False, True, False, False])
+    # the section's semi-axes are in half shoulder widths: a wider subject, a wider trunk
+    assert inside_trunk(np.array([0.0, 0.2, -0.15]), hip, neck, 1.5 * left, 1.5 * right)
+    assert not inside_trunk(np.array([0.0, 0.2, -0.15]), hip, neck, left, right)
+
+
+def test_an_elbow_laid_into_the_trunk_is_hinted_out_even_where_every_term_prefers_it(human):
+    import pinocchio as pin
+
+    q = pin.neutral(human.model)
+    # The upper arm swung across the chest: the elbow inside the trunk, an impossible pose.
+    for joint, angle in [("left_shoulder_X", -1.2), ("left_elbow_Z", 1.3)]:
+        q[human.model.joints[human.model.getJointId(joint)].idx_q] = angle
+    configuration = Configuration(human.model, q)
+    shoulder, elbow, wrist = configuration.frame_positions(human.frame_ids(["LShoulder", "LElbow", "LWrist"]))
+    trunk = configuration.frame_positions(human.frame_ids(["Hip", "Neck", "LShoulder", "RShoulder"]))
+    assert inside_trunk(elbow, *trunk)
+    staying = _Towards(human, elbow)  # a criterion whose peak is where the elbow is
+    hints = SwivelSearch(human, [(staying, 1.0)]).hints(configuration, ["LElbow"])
+    assert "LElbow" in hints
+    assert not inside_trunk(hints["LElbow"], *trunk)
+    # the best swivel outside the trunk: the nearest to the elbow on its circle
+    circle = swivel_circle(shoulder, elbow, wrist, 360)
+    outside = circle[~inside_trunk(circle, *trunk)]
+    nearest = outside[np.argmin(np.linalg.norm(outside - elbow, axis=1))]
+    assert np.linalg.norm(hints["LElbow"] - nearest) < 0.02
+    assert SwivelSearch(human, [(staying, 1.0)], trunk_section=None).hints(configuration, ["LElbow"]) == {}

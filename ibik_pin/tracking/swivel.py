@@ -34,7 +34,7 @@ from ibik_pin.model import BodyModel
 from ibik_pin.tasks.segments import SegmentCriterion
 from ibik_pin.tracking.views import LIMB_HALF_WIDTH
 
-__all__ = ["LIMB_ENDS", "SwivelSearch", "swivel_circle", "views_cross"]
+__all__ = ["LIMB_ENDS", "TRUNK_SECTION", "SwivelSearch", "inside_trunk", "swivel_circle", "views_cross"]
 
 #: Middle joint -> the two limb ends it swivels between.
 LIMB_ENDS: dict[str, tuple[str, str]] = {
@@ -43,6 +43,42 @@ LIMB_ENDS: dict[str, tuple[str, str]] = {
     "LKnee": ("LHip", "LAnkle"),
     "RKnee": ("RHip", "RAnkle"),
 }
+
+
+#: Keypoints that place the trunk: its axis from the pelvis centre to the neck, its width from the
+#: shoulders (inside_trunk).
+TRUNK_KEYPOINTS = ("Hip", "Neck", "LShoulder", "RShoulder")
+#: Semi-axes of the trunk's cross-section an elbow's centre never enters, sideways and front to back,
+#: in half shoulder widths (between the shoulder joint centres). A trunk's half width at the waist is
+#: about 0.75-0.85 of that and its half depth 0.55-0.7, and an elbow's centre keeps an arm's radius
+#: (another 0.2) outside the skin. Measured on the sweep's 14 motions (1120 frames of each elbow,
+#: docs/sweep.md): no true elbow inside this section; 24 of the 156 frames whose IBIK elbow was more
+#: than 40 mm off were inside (an arm laid into the trunk, where both views' silhouettes cover it).
+TRUNK_SECTION = (0.75, 0.6)
+
+
+def inside_trunk(points: np.ndarray, hip: np.ndarray, neck: np.ndarray, left_shoulder: np.ndarray,
+                 right_shoulder: np.ndarray, section: tuple[float, float] = TRUNK_SECTION) -> np.ndarray:
+    """Whether points (..., 3) [m] lie inside the trunk: an elliptic cylinder about the line from the
+    pelvis centre `hip` to `neck`, between those two heights, of semi-axes `section` (sideways,
+    front to back) in half shoulder widths."""
+    points = np.asarray(points, dtype=float)
+    up = neck - hip
+    height = float(np.linalg.norm(up))
+    half_width = 0.5 * float(np.linalg.norm(left_shoulder - right_shoulder))
+    if height < 1e-9 or half_width < 1e-9:
+        return np.zeros(points.shape[:-1], dtype=bool)
+    up = up / height
+    sideways = (left_shoulder - right_shoulder) - ((left_shoulder - right_shoulder) @ up) * up
+    if np.linalg.norm(sideways) < 1e-9:
+        return np.zeros(points.shape[:-1], dtype=bool)
+    sideways = sideways / np.linalg.norm(sideways)
+    forward = np.cross(up, sideways)
+    offset = points - hip
+    along = offset @ up
+    across = (offset @ sideways) / (section[0] * half_width)
+    depth = (offset @ forward) / (section[1] * half_width)
+    return (along > 0.0) & (along < height) & (across**2 + depth**2 < 1.0)
 
 
 def views_cross(cameras: Sequence, min_angle_deg: float = 45.0) -> bool:
@@ -165,6 +201,10 @@ class SwivelSearch:
             it little (they stop at the criterion's peak), so the hint's spacing shows in the
             result: on the real-mocap benchmark's boxing elbows (2 views) 36, 72 and 144 samples
             gave 17.3, 14.0 and 12.3 mm (docs/method.md).
+        trunk_section: an elbow is never hinted inside the trunk (inside_trunk, these semi-axes),
+            and one that the solve left there is hinted to the best swivel outside it whatever the
+            terms say: with two views the silhouettes cover the trunk's whole volume, so the image
+            criterion scores an arm laid into the trunk as well as the true one. None: no trunk.
     """
 
     body: BodyModel
@@ -175,6 +215,7 @@ class SwivelSearch:
     min_radius: float = 2.0 * LIMB_HALF_WIDTH
     inside_silhouettes: Callable[[np.ndarray], np.ndarray] | None = None
     refine: int = 4
+    trunk_section: tuple[float, float] | None = TRUNK_SECTION
 
     def __post_init__(self) -> None:
         if int(self.samples) < 3:
@@ -183,6 +224,18 @@ class SwivelSearch:
             raise InputError(f"refine: expected a number of points >= 0, found {self.refine}")
         self._limb_ids: dict[str, np.ndarray] = {}
         self._term_rows: dict[tuple[SegmentCriterion, int], np.ndarray] = {}
+        self._trunk_ids = (self.body.frame_ids(list(TRUNK_KEYPOINTS))
+                           if self.trunk_section is not None and all(k in self.body.keypoints for k in TRUNK_KEYPOINTS)
+                           else None)
+
+    def _inside_trunk(self, configuration: Configuration, elbows: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """Whether each candidate (L, C, 3) of the limbs lies inside the trunk, (L, C); only the
+        limbs flagged in `elbows` (L,) can."""
+        inside = np.zeros(points.shape[:2], dtype=bool)
+        if self._trunk_ids is not None and self.trunk_section is not None and elbows.any():
+            hip, neck, left_shoulder, right_shoulder = configuration.frame_positions(self._trunk_ids)
+            inside[elbows] = inside_trunk(points[elbows], hip, neck, left_shoulder, right_shoulder, self.trunk_section)
+        return inside
 
     def _limb_frame_ids(self, name: str) -> np.ndarray:
         """The frames of a limb's root, middle joint and end, shape (3,) (looked up once)."""
@@ -251,24 +304,31 @@ class SwivelSearch:
             current = configuration.frame_positions(task.frame_ids)
             poses.append((current, task.at_pose(current)))
         weighted, present = self._weighted(poses, limb_ids[chosen, 1], circles)
+        elbows = np.array([limbs[limb] in ("LElbow", "RElbow") for limb in chosen])
+        forbidden = self._inside_trunk(configuration, elbows, circles)
         if self.refine:
             # Then around each limb's best sample, within one spacing of it on either side.
-            best = np.argmax(weighted.sum(axis=0), axis=1)
+            best = np.argmax(np.where(forbidden, -np.inf, weighted.sum(axis=0)), axis=1)
             offsets = np.arange(1, int(self.refine) + 1) / (int(self.refine) + 1)
             offsets = np.concatenate([-offsets[::-1], offsets]) * (2.0 * np.pi / samples)
             finer = circle.at(2.0 * np.pi * best[:, None] / samples + offsets)
             finer_weighted, _ = self._weighted(poses, limb_ids[chosen, 1], finer)
             circles = np.concatenate([circles, finer], axis=1)
             weighted = np.concatenate([weighted, finer_weighted], axis=2)
+            forbidden = np.concatenate([forbidden, self._inside_trunk(configuration, elbows, finer)], axis=1)
         values = weighted.sum(axis=0)  # absent terms are zeros
         limbs_read = np.flatnonzero(present.any(axis=0))
-        best = np.argmax(values, axis=1)
-        spread = values.max(axis=1) - values.min(axis=1)
+        best = np.argmax(np.where(forbidden, -np.inf, values), axis=1)
+        possible = ~forbidden.all(axis=1)
+        spread = np.where(possible, np.where(forbidden, -np.inf, values).max(axis=1)
+                          - np.where(forbidden, np.inf, values).min(axis=1), 0.0)
         at_best = np.take_along_axis(values, best[:, None], axis=1)[:, 0]
         # Every term must agree (none worse at the hint than where the joint is): see the class.
         agreed = np.all((np.take_along_axis(weighted, best[None, :, None], axis=2)[..., 0] >= weighted[..., 0])
                         | ~present, axis=0)
         moved = np.linalg.norm(circles[np.arange(chosen.size), best] - middles[chosen], axis=1)
         gained = at_best - values[:, 0] > self.min_gain * spread
-        hinted = agreed & (spread > 0.0) & gained & (moved > self.min_distance)
+        # Sample 0 is where the joint is: an elbow inside the trunk leaves it whatever the terms say.
+        trapped = forbidden[:, 0]
+        hinted = possible & ((agreed & (spread > 0.0) & gained) | trapped) & (moved > self.min_distance)
         return {limbs[chosen[limb]]: circles[limb, best[limb]] for limb in limbs_read if hinted[limb]}
