@@ -4,12 +4,14 @@ those and nothing else.
 The manifest is the output folder's marker file (:data:`MARKER`), a JSON object::
 
     {"written_by": "ibik_pin", "manifest": 1, "state": "complete",
-     "files": {"joints.trc": 48213, ...},  "host": "...", "pid": 1234}
+     "files": {"joints.trc": 48213, ...}, "kept_user_files": ["notes.txt"], "host": "...", "pid": 1234}
 
 `files` maps each path ibik wrote (relative, "/"-separated) to its size in bytes, so that a batch
-can tell a complete output from one a user or a crash cut short. `state` is "staging" while a run
-writes into its staging folder (with the writing process's host and pid, so that a leftover of a
-killed run can be told from a run still going) and "complete" once published.
+can tell a complete output from one a user or a crash cut short; `kept_user_files`, the user's
+paths a run carried over from the earlier output (never ours: a later run keeps them too).
+`state` is "staging" while a run writes into its staging folder (with the writing process's host
+and pid, so that a leftover of a killed run can be told from a run still going) and "complete"
+once published.
 
 An earlier version wrote the marker as one line of plain text and no list. Such a folder is read
 conservatively: only the names ibik's outputs have (:data:`KNOWN_OUTPUTS`, ``overlay_*.mp4``) are
@@ -78,11 +80,14 @@ def read_manifest(folder: Path) -> Manifest | None:
                     pid=int(content.get("pid", 0)) if isinstance(content.get("pid"), int) else 0)
 
 
-def write_manifest(folder: Path, state: str, files: dict[str, int] | None = None) -> None:
+def write_manifest(folder: Path, state: str, files: dict[str, int] | None = None,
+                   kept: list[str] | None = None) -> None:
     """Write `folder`'s marker: in state "staging" with this process's host and pid, or "complete"
-    with the files listed."""
+    with the files listed, and the user's paths kept from the earlier output (`kept`, not ours)."""
     content: dict = {"written_by": WRITTEN_BY, "manifest": MANIFEST_VERSION, "state": state,
                      "files": dict(sorted((files or {}).items()))}
+    if kept:
+        content["kept_user_files"] = sorted(kept)
     if state == "staging":
         content |= {"host": socket.gethostname(), "pid": os.getpid()}
     write_text_atomically(folder / MARKER, json.dumps(content, indent=1) + "\n")

@@ -205,7 +205,7 @@ def publish(staging: Path, out: Path, attempts: int = 20) -> list[str]:
     staging folder takes its place, and the earlier one is removed. When another run publishes
     into the same OUTDIR in between, the move is tried again: the last run to finish wins, and
     neither fails nor leaves a backup behind."""
-    write_manifest(staging, "complete", listed_files(staging))
+    written = listed_files(staging)
     kept: list[str] = []
     for _ in range(attempts):
         previous = None
@@ -223,6 +223,7 @@ def publish(staging: Path, out: Path, attempts: int = 20) -> list[str]:
             except BaseException:
                 os.replace(previous, out)
                 raise
+        write_manifest(staging, "complete", written, kept)
         try:
             os.replace(staging, out)
         except OSError as error:

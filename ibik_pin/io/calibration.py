@@ -156,6 +156,9 @@ def write_calibration(path: PathLike, cameras: Sequence[PinholeCamera]) -> None:
         OSError: the file cannot be written.
     """
     path = as_path(path)
+    if not isinstance(cameras, (list, tuple)):
+        raise InputError(f"cameras: expected a list of PinholeCamera, found {type(cameras).__name__}; a single "
+                         "camera goes in a list: [camera]", parameter="cameras")
     document: dict[str, dict] = {}
     for index, camera in enumerate(cameras):
         if not isinstance(camera, PinholeCamera):
