@@ -35,7 +35,7 @@ in a slow minute (the arm once 725 frames/s between runs of 1022-1120).
 A benchmark, not a test: absolute times on a shared 2-core machine are indicative, ratios less so.
 
 Usage: python experiments/benchmark.py --out out/benchmark [--json PATH] [--frames 120] [--rounds 3]
-       [--qp-backends-only]
+       [--qp-backends-only | --steps-only]
 """
 
 from __future__ import annotations
@@ -342,6 +342,8 @@ def main() -> None:
                         "real-mocap benchmark's cache is reused when given)")
     parser.add_argument("--qp-backends-only", action="store_true",
                         help="time the QP backends alone (their table and JSON, nothing else)")
+    parser.add_argument("--steps-only", action="store_true",
+                        help="time our qp steps (2 views, one thread) against Pink's alone (their JSON, nothing else)")
     arguments = parser.parse_args()
     arguments.out.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
@@ -355,6 +357,16 @@ def main() -> None:
                                                     f"--qp-backends-only`\n\n{table}\n")
         (arguments.json or arguments.out / "benchmark.json").write_text(strict_json(
             {"qp_backends": backends, "frames": arguments.frames, "wall_s": time.perf_counter() - started}))
+        return
+    if arguments.steps_only:
+        inputs = prepare_inputs(BOXING, DATA, arguments.frames, cache)
+        run_folder = cache.parent / "benchmark_runs" / "qp_2v"
+        run_variant(inputs, variant("ibik2v"), "clean", {"method": "qp"}, out=run_folder)  # Pink starts from its q
+        steps, pink_results, ratios = step_rounds(inputs, run_folder, arguments.frames, arguments.rounds)
+        figures = {"steps": steps, "pink": pink_results, "ratios": ratios, "frames": arguments.frames,
+                   "load_average": list(os.getloadavg()), "wall_s": time.perf_counter() - started}
+        print(strict_json(figures))
+        (arguments.json or arguments.out / "benchmark_steps.json").write_text(strict_json(figures))
         return
     arm = arm_fps(arguments.frames, arguments.rounds)
     body, context, profile = whole_body(arguments.frames, cache, arguments.rounds)

@@ -217,7 +217,7 @@ def markdown(results: dict, rounds: int, header: str) -> str:
              "| motion, views | ibik image, solves [frames/s] | OpenSim IK [frames/s] | ratio | ibik image, frame "
              "loop | ratio | ibik blind, solves | ratio | whole run: ibik image [s] | OpenSim [s] | ratio |",
              "| --- |" + " ---: |" * 10]
-    for key, row in results.items():
+    for row in results.values():
         lines.append(
             f"| {row['motion']}, {row['views']} | {row['ibik_image_solve_fps']:.1f} | {row['opensim_fps']:.1f} | "
             f"{row['ibik_image_solve_over_opensim']:.2f} | {row['ibik_image_loop_fps']:.1f} | "

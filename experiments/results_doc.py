@@ -364,6 +364,73 @@ def speed_section() -> list[str]:
     ]
 
 
+def opensim_section() -> list[str]:
+    """`ibik track` against OpenSim's IK on the same model and targets (experiments/opensim_speed.py)."""
+    if not (RESULTS / "opensim_speed.json").is_file():
+        return []
+    data = load("opensim_speed.json")
+
+    def ratio(row: dict, key: str) -> str:
+        values = row.get(f"{key}_rounds")
+        return f"{row[key]:.2f}" + (f" ({min(values):.2f}-{max(values):.2f})" if values else "")
+
+    rows = [[f"{row['motion']}, {row['views']} views", f"{row['ibik_image_solve_fps']:.0f}",
+             f"{row['opensim_fps']:.0f}",
+             ratio(row, "ibik_image_solve_over_opensim"), f"{row['ibik_image_loop_over_opensim']:.2f}",
+             f"{row['ibik_image_whole_over_opensim_whole']:.2f}", f"{row['ibik_blind_solve_over_opensim']:.2f}",
+             mm(row.get("ibik_image_judged_error_mm")), f"{row['opensim_marker_rms_mm']:.1f}"]
+            for row in data["conditions"].values()]
+    before, after = data["load_average_before"][0], data["load_average_after"][0]
+    return [
+        "### Against OpenSim's inverse kinematics",
+        "",
+        f"`{data['command']}` (`experiments/results/opensim_speed.json`; code at {data['revision']}). OpenSim 4.6's",
+        "InverseKinematicsTool (C++, one thread, blind) on the model.osim `ibik track` wrote, toward the same",
+        "targets file (every target keypoint, weight 1), alternated with `ibik track` with the image and blind",
+        f"in each of {data['rounds']} rounds; each ratio is the median of the rounds' ratios (their range in",
+        "brackets). ibik's frame rate is report.json's of the solves alone (the support images are built in",
+        "its second process, as by default); OpenSim's is frames over the tool's run (reading the TRC, the",
+        "solves, writing the .mot). \"whole\": the whole run_track call (subject calibration, every output",
+        "written) against loading model.osim and running the tool. Real motion: the real-mocap benchmark's",
+        "clean inputs (640 x 480); demo: `ibik demo`'s inputs. The machine was shared with other sessions",
+        f"(load average {before:.1f} at the start, {after:.1f} at the end on 2 cores): the ratios moved with",
+        "the load, absolute figures more.",
+        "",
+        *table(["motion, views", "ibik image [frames/s]", "OpenSim [frames/s]", "ratio, solves", "ratio, frame loop",
+                "ratio, whole", "ratio, ibik blind", "ibik error [mm]", "OpenSim marker RMS [mm]"], rows),
+        "",
+    ]
+
+
+def solve_time_section() -> list[str]:
+    """Where the image solve's time goes (experiments/solve_time.py)."""
+    if not (RESULTS / "solve_time.json").is_file():
+        return []
+    data = load("solve_time.json")
+    rows = []
+    for condition, variants in data["conditions"].items():
+        for name, figures in variants.items():
+            rows.append([condition, f"{name} {figures['overrides'] or ''}".strip(), f"{figures['solve_fps']:.0f}",
+                         f"{figures['over_base']:.2f}",
+                         *(f"{100 * figures['share'][part]:.0f} %" for part in figures["share"]),
+                         f"{figures['steps_per_frame']:.1f}", f"{figures['steps_per_frame_before_peak_check']:.1f}",
+                         mm(figures["judged_error_mm"])])
+    parts = list(next(iter(next(iter(data["conditions"].values())).values()))["share"])
+    return [
+        "### Where the image solve's time goes",
+        "",
+        f"`{data['command']}` (`experiments/results/solve_time.json`; code at {data['revision']}, load average",
+        f"{data['load_average_before'][0]:.1f}-{data['load_average_after'][0]:.1f}): `ibik track` with the image,",
+        "its frame's solve timed by parts, the variants in turn in each round; frames/s the median of the",
+        "rounds, \"over base\" the median of the rounds' ratios. Steps a frame: solver steps computed; before",
+        "the peak check, an image solve that ended at the criterion's peak computed one more.",
+        "",
+        *table(["condition", "variant", "solves [frames/s]", "over base", *parts, "steps a frame",
+                "before the peak check", "error [mm]"], rows, numeric_from=2),
+        "",
+    ]
+
+
 def qp_backends_section() -> list[str]:
     """The level QP's backends, from whichever result file holds the benchmark's `qp_backends`."""
     for path in sorted(RESULTS.glob("*.json")):
@@ -439,8 +506,8 @@ def document() -> str:
         "",
     ]
     for section in (paper_section, real_mocap_section, held_out_section, pose2sim_section, priority_section,
-                    paper_tables_section, virtual_section, speed_section, qp_backends_section, batch_section,
-                    codecs_section):
+                    paper_tables_section, virtual_section, speed_section, opensim_section, solve_time_section,
+                    qp_backends_section, batch_section, codecs_section):
         lines += section()
     return "\n".join(lines).rstrip("\n") + "\n"
 
