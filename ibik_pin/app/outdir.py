@@ -77,8 +77,10 @@ def file_name_part(text: str, limit: int = LONGEST_OUTPUT_NAME - 16) -> str:
 
 
 def _check_name_fits(text: str, resolved: Path) -> None:
+    """Refuse a name or path longer than the file system takes, checked on the text alone (a
+    stat of such a path fails with ENAMETOOLONG)."""
     parent = resolved.parent
-    while not parent.exists():
+    while not os.path.lexists(parent):  # False, not an error, for a path too long
         parent = parent.parent
     name_max = _limit(parent, "PC_NAME_MAX", 255)
     for part in resolved.relative_to(parent).parts:
@@ -111,6 +113,7 @@ def check_outdir(out: str | os.PathLike[str], inputs: Iterable[Path | None]) -> 
     if not text.strip() or path.name in ("", ".", ".."):
         raise OutputFolderError(f"--out {text!r}: name the output folder itself (a new folder, or an earlier "
                                 "output of ibik), not the current or a parent folder")
+    _check_name_fits(text, Path(os.path.abspath(text)))
     if path.is_symlink():
         raise OutputFolderError(f"--out {text}: is a symbolic link; name the folder it points to, or a new one")
     resolved = path.resolve()
@@ -124,7 +127,6 @@ def check_outdir(out: str | os.PathLike[str], inputs: Iterable[Path | None]) -> 
         if source in resolved.parents and source.is_dir():
             raise OutputFolderError(f"--out {text}: it lies inside the input folder {given}; choose a folder "
                                     "outside the inputs")
-    _check_name_fits(text, resolved)
     if path.exists():
         if not path.is_dir():
             raise OutputFolderError(f"--out {text}: is an existing file, not a folder; choose a folder name")

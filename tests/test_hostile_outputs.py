@@ -1,0 +1,253 @@
+"""What `ibik track` does with what the user keeps around its outputs: files saved inside an earlier
+output folder, old-style markers, hostile manifests, names too long for the file system, camera
+names that cannot name a file.
+
+Each case runs in a folder holding real inputs (the demo's walking, 2 views) and an earlier output
+of ibik (tests.test_hostile_inputs' `case`). A run that goes on must exit 0, say what it did in one
+warning line, keep every file of the user's byte for byte and replace only ibik's; a refusal must
+exit 2 with one stderr line and leave the whole folder as it was.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import re
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from ibik_pin.app.manifest import MARKER, read_manifest
+from ibik_pin.cli import main
+from ibik_pin.exceptions import IbikWarning
+from tests import test_hostile_inputs as hostile
+from tests.test_hostile_inputs import Case, tree_digest
+
+pristine, case = hostile.pristine, hostile.case  # the fixtures: real inputs and an earlier output
+
+BLIND = ("--no-image",)  # the output folder is the matter here, not the image: a quicker run
+
+
+def run_cli(arguments: list[str], capfd) -> tuple[int, list[str]]:
+    """main's exit code and every line it would print on stderr: its own, and its IbikWarnings in
+    the one-line form the command gives them."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            code = main(arguments)
+        except SystemExit as stop:  # argparse's refusals
+            code = int(stop.code or 0)
+    lines = capfd.readouterr().err.splitlines()
+    lines += [f"ibik: warning: {' '.join(str(w.message).split())}" for w in caught
+              if issubclass(w.category, IbikWarning)]
+    return code, lines
+
+
+def user_files(case: Case) -> dict[str, str]:
+    """The digest of the output folder without what ibik writes there (its manifest lists it)."""
+    listed = set((read_manifest(case.out).files or {}) if read_manifest(case.out) else {})
+    return {name: digest for name, digest in tree_digest(case.out).items() if name not in listed and name != MARKER}
+
+
+# -- A run into an earlier output keeps the user's files, replaces ibik's, and says so -------------
+
+def _write(path: Path, data: bytes | str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(data if isinstance(data, bytes) else data.encode())
+
+
+def _notes(c: Case) -> str:
+    _write(c.out / "analysis_notes.txt", "knee angles look high in frame 12\n")
+    return "analysis_notes.txt"
+
+
+def _nested(c: Case) -> str:
+    _write(c.out / "analysis" / "plots" / "knee.png", bytes(range(256)) * 8)
+    return "analysis/plots/knee.png"
+
+
+def _empty_folder(c: Case) -> str:
+    (c.out / "later").mkdir()
+    return "later"
+
+
+def _link(c: Case) -> str:
+    os.symlink("../in", c.out / "inputs_link")
+    return "inputs_link"
+
+
+def _hidden(c: Case) -> str:
+    _write(c.out / ".my_settings", "x = 1\n")
+    return ".my_settings"
+
+
+def _edited_copy(c: Case) -> str:
+    _write(c.out / "joints_cleaned.trc", (c.out / "joints.trc").read_bytes()[:1000])
+    return "joints_cleaned.trc"
+
+
+def _read_only(c: Case) -> str:
+    _write(c.out / "locked.csv", "a,b\n1,2\n")
+    (c.out / "locked.csv").chmod(0o444)
+    return "locked.csv"
+
+
+def _old_marker(c: Case) -> str:
+    (c.out / MARKER).write_text("written by ibik track; a later run may replace this folder\n")
+    return _notes(c)
+
+
+def _garbled_manifest(c: Case) -> str:
+    (c.out / MARKER).write_text(json.dumps({"written_by": "ibik_pin", "files": "everything"}))
+    return _nested(c)
+
+
+def _unicode_name(c: Case) -> str:
+    _write(c.out / "résumé de l'essai.txt", "é\n")
+    return "résumé de l'essai.txt"
+
+
+KEPT: list[tuple[str, Callable[[Case], str]]] = [
+    ("notes-file", _notes), ("nested-folders", _nested), ("empty-folder", _empty_folder),
+    ("symlink-to-the-inputs", _link), ("hidden-file", _hidden), ("edited-copy-of-an-output", _edited_copy),
+    ("read-only-file", _read_only), ("old-plain-text-marker", _old_marker),
+    ("manifest-without-a-file-list", _garbled_manifest), ("accented-name", _unicode_name),
+]
+
+
+@pytest.mark.parametrize("setup", [pytest.param(setup, id=name) for name, setup in KEPT])
+def test_a_rerun_keeps_the_users_files_replaces_ibiks_and_says_so_in_one_line(case, setup, capfd):
+    example = setup(case)
+    kept = {name: digest for name, digest in tree_digest(case.out).items()
+            if name == example or name.startswith(example + "/") or example.startswith(name + "/")}
+    inputs = tree_digest(case.inputs)
+    earlier_joints = (case.out / "joints.trc").stat().st_mtime_ns
+
+    code, lines = run_cli(case.arguments(*BLIND), capfd)
+
+    assert code == 0, lines
+    assert len(lines) == 1 and lines[0].startswith("ibik: warning: --out "), lines
+    assert f"kept 1 file that ibik did not write there (e.g. {example}) beside the new outputs" in lines[0], lines
+    assert user_files(case) == kept  # every path of the user's, byte for byte
+    assert tree_digest(case.inputs) == inputs
+    manifest = read_manifest(case.out)
+    assert manifest is not None and manifest.state == "complete"
+    assert set(manifest.files) >= {"joints.trc", "q.csv", "motion.mot", "motion.bvh", "model.osim", "report.json"}
+    assert not set(manifest.files) & set(kept)
+    assert (case.out / "joints.trc").stat().st_mtime_ns != earlier_joints  # ibik's own: written again
+    assert sorted(p.name for p in case.root.iterdir()) == ["in", "out"]  # no staging or set-aside folder left
+
+
+def test_the_kept_files_are_recorded_in_the_manifest_and_kept_again_by_the_next_run(case, capfd):
+    _notes(case)
+    assert run_cli(case.arguments(*BLIND), capfd)[0] == 0
+    content = json.loads((case.out / MARKER).read_text())
+    assert content["kept_user_files"] == ["analysis_notes.txt"]
+
+    code, lines = run_cli(case.arguments(*BLIND), capfd)
+
+    assert code == 0 and len(lines) == 1 and "kept 1 file " in lines[0], lines
+    assert (case.out / "analysis_notes.txt").read_text() == "knee angles look high in frame 12\n"
+
+
+def test_a_manifest_listing_paths_outside_the_folder_touches_nothing_outside(case, capfd):
+    content = json.loads((case.out / MARKER).read_text())
+    content["files"] |= {"../in/targets.trc": 1, "/etc/hostname": 1}
+    (case.out / MARKER).write_text(json.dumps(content))
+    inputs = tree_digest(case.inputs)
+
+    code, lines = run_cli(case.arguments(*BLIND), capfd)
+
+    assert code == 0 and lines == [], lines
+    assert tree_digest(case.inputs) == inputs
+    assert "../in/targets.trc" not in read_manifest(case.out).files
+
+
+def test_a_refusal_into_an_output_holding_the_users_files_changes_nothing(case, capfd):
+    _notes(case)
+    case.edit_trc(case.targets, lambda data: data.marker_names.__setitem__(0, "Nosee"))
+    before = tree_digest(case.root)
+
+    code, lines = run_cli(case.arguments(*BLIND), capfd)
+
+    assert code == 2 and len(lines) == 1 and lines[0].startswith("ibik: error: "), lines
+    assert tree_digest(case.root) == before
+
+
+# -- Refused up front, before any work ------------------------------------------------------------
+
+def _user_file_named_like_an_output(name: str) -> Callable[[Case], list[str]]:
+    def setup(c: Case) -> list[str]:
+        _write(c.out / name, "the user's own\n")
+        return c.arguments(*BLIND)
+    return setup
+
+
+def _long_name(name: str) -> Callable[[Case], list[str]]:
+    return lambda c: c.arguments(*BLIND, out=str(c.root / name))
+
+
+def _marker_a_folder(c: Case) -> list[str]:
+    mine = c.root / "mine"
+    (mine / MARKER).mkdir(parents=True)
+    _write(mine / "thesis.tex", "keep")
+    return c.arguments(*BLIND, out=str(mine))
+
+
+def _path_too_long(c: Case) -> list[str]:
+    deep = c.root.joinpath(*(["d" * 200] * 21), "out")  # over 4096 bytes: no file system here holds it
+    return c.arguments(*BLIND, out=str(deep))
+
+
+REFUSED: list[tuple[str, Callable[[Case], list[str]], str]] = [
+    ("users-replay-html", _user_file_named_like_an_output("replay.html"), r"replay\.html is not listed"),
+    ("users-overlay-video", _user_file_named_like_an_output("overlay_cam1.mp4"), r"overlay_cam1\.mp4 is not listed"),
+    ("users-angles-png", _user_file_named_like_an_output("angles.png"), r"angles\.png"),
+    ("name-300-ascii-bytes", _long_name("o" * 300), r"300 bytes long, more than a file name can hold"),
+    ("name-130-accented-letters", _long_name("é" * 130), r"260 bytes long, more than a file name can hold"),
+    ("path-over-4096-bytes", _path_too_long, r"bytes a path can have here"),
+    ("marker-is-a-folder", _marker_a_folder, r"not an output of ibik"),
+]
+
+
+@pytest.mark.parametrize(("setup", "expected"), [pytest.param(s, e, id=i) for i, s, e in REFUSED])
+def test_an_outdir_that_would_fail_late_or_lose_a_file_is_refused_first(case, setup, expected, capfd):
+    arguments = setup(case)
+    before = tree_digest(case.root)
+
+    code, lines = run_cli(arguments, capfd)
+
+    assert code == 2, lines
+    assert len(lines) == 1 and lines[0].startswith("ibik: error: --out "), lines
+    assert re.search(expected, lines[0]), lines
+    assert tree_digest(case.root) == before
+
+
+# -- Legal names that used to fail only after all the work ---------------------------------------
+
+@pytest.mark.parametrize("length", [240, 255])
+def test_a_long_legal_outdir_name_is_written_and_replaced(case, length, capfd):
+    out = case.root / ("r" * length)
+    for _ in range(2):  # new, then over the earlier output (set aside under a name of its own)
+        code, lines = run_cli(case.arguments(*BLIND, out=str(out)), capfd)
+        assert code == 0 and lines == [], lines
+    assert (out / "report.json").is_file()
+    assert sorted(p.name for p in case.root.iterdir()) == sorted(["in", "out", out.name])
+
+
+@pytest.mark.parametrize(("camera", "file"), [("cam/1", "overlay_cam_1.mp4"), ("../cam1", "overlay__._cam1.mp4")])
+def test_a_camera_name_that_cannot_name_a_file_is_said_before_the_solve_and_sanitised(case, camera, file, capfd):
+    case.edit_cameras(lambda c: dataclasses.replace(c, name=camera) if c.name == "cam1" else c)
+    inputs = tree_digest(case.inputs)
+
+    code, lines = run_cli(case.arguments("--overlay", *BLIND, iterations="1"), capfd)
+
+    assert code == 0, lines
+    assert len(lines) == 1 and f"camera {camera!r} cannot name a file as it is; its overlay video is {file}" in lines[0]
+    assert (case.out / file).is_file() and (case.out / "overlay_cam2.mp4").is_file()
+    assert file in read_manifest(case.out).files
+    assert tree_digest(case.inputs) == inputs
+    assert not any(path.name.startswith("overlay") for path in case.root.rglob("*") if path.parent != case.out)
