@@ -222,6 +222,9 @@ class TrackingReport:
         trial_lengths: with --trial-lengths reach, each limb segment's static and trial length and
             their change [mm], and per limb what decided (subject.trial_lengths.TrialLengths.report);
             None otherwise.
+        diagnosis: what the run judged of its own evidence: suspect views and frames, the figures
+            and thresholds (app.diagnosis.Diagnosis); None when not judged (the report of a run
+            made outside `ibik track`).
         units: :data:`UNITS`, written into the file so that it describes itself.
     """
 
@@ -259,6 +262,7 @@ class TrackingReport:
     triangulation: TriangulationReport | None = None
     extrinsics: ExtrinsicsRefit | None = None
     trial_lengths: dict[str, Any] | None = None
+    diagnosis: dict[str, Any] | None = None
     units: dict[str, str] = field(default_factory=lambda: dict(UNITS))
 
     @classmethod

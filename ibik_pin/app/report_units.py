@@ -90,6 +90,23 @@ UNITS = {
                                   "change; a limb is only ever lengthened, to reach its targets"),
     "trial_lengths.evidence": ("per limb lengthened, what decided: the reach (98th percentile of the root-to-end "
                                "distance over 3-frame averages) [m], the segments' sum [m] and the factor"),
+    "diagnosis": ("what the run judged of its own evidence (app.diagnosis; docs/method.md, Self-diagnosis): the "
+                  "diagnosis.* entries"),
+    "diagnosis.findings": ("every suspect view or frame: cause (view_targets_outside, view_empty, "
+                           "view_skeleton_outside, frame_jump, frame_step, frame_residual), subject (camera name or "
+                           "TRC frame number), figure and threshold (in the unit of the cause's threshold in "
+                           "diagnosis.thresholds; 0-1 shares for views), consequence (what the run did)"),
+    "diagnosis.targets_inside_sampled": ("0-1: per camera, before the solve, the share of the projected targets "
+                                         "inside its silhouette, median over the sampled frames (null: every "
+                                         "sampled silhouette empty)"),
+    "diagnosis.sampled_frames": "the TRC frame numbers targets_inside_sampled was measured on",
+    "diagnosis.skeleton_inside_median": ("0-1: per camera, after the solve, the median over the frames of "
+                                         "inside_fraction_per_view"),
+    "diagnosis.departure_per_frame_m": ("m: per frame, the median over its targets of the distance to where the "
+                                        "frames on either side put them (interpolated in time; extrapolated at "
+                                        "the ends); null where not measured"),
+    "diagnosis.thresholds": ("view_floor and view_ratio (0-1 shares), jump_distance_m [m], frame_residual_floor_m "
+                             "[m] and frame_residual_ratio (times the trial's median residual)"),
     "method": "the solver scheme: qp, stack, liegeois or ik",
     "qp_solver": "the backend that solved the qp scheme's level QPs (null for the other schemes)",
     "joint_limit_hits": "per TRC frame, the joints (Pinocchio joint names) at a position limit at the solution",

@@ -18,9 +18,14 @@ import numpy as np
 from tqdm import tqdm
 
 from ibik_pin.app.axes import TRC_AXES, TRC_TO_MODEL, choose_axes, sample_frames
+from ibik_pin.app.diagnosis import Diagnosis, add_jumps, axes_hint, check_views, diagnose_result, view_evidence
+from ibik_pin.app.dropped_frames import SolvedFramesSource, expand_to_frames
 from ibik_pin.app.input_checks import (
+    check_camera_focal_lengths,
     check_cameras_see_targets,
+    check_static_cells,
     check_trc,
+    drop_jumping_frames,
     drop_outlier_targets,
     silhouettes_all_empty,
 )
@@ -63,6 +68,8 @@ def _trc_in_metres(option: str, path: Path, c3d_mapping: Path | None = None) -> 
     outliers = np.zeros(positions_m.shape[:2], dtype=bool)
     if option == "--targets":
         positions_m, outliers = drop_outlier_targets(option, data.marker_names, positions_m)
+    else:  # a static trial's lengths are measured: a corrupt cell is refused, not dropped
+        check_static_cells(option, path, data, positions_m)
     return data, positions_m, outliers
 
 
@@ -148,6 +155,7 @@ def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
         if job.cameras:
             with as_options({"names": "--cameras"}):
                 cameras = select_cameras(cameras, job.cameras)
+        check_camera_focal_lengths(cameras)
         if job.overlay:  # said now, not after the solve: a camera's name names its overlay video
             renamed = {name: file for name, file in overlay_file_names([c.name for c in cameras]).items()
                        if file != f"overlay_{name}.mp4"}
@@ -172,6 +180,8 @@ def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
     frame_count = targets_trc_m.shape[0]
     if frame_count == 0:
         raise InputError(f"--targets {targets}: no frame")
+    # Frames whose targets all leap away and back are left unsolved, their poses interpolated.
+    targets_trc_m, jumps = drop_jumping_frames("--targets", trc.frame_numbers, targets_trc_m, trc.times)
     silhouettes = None
     if settings.use_image:
         if not cameras:
@@ -199,6 +209,14 @@ def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
     if not job.quiet:
         print(f"ibik: TRC axes: {axes.describe()}", file=sys.stderr)
     targets_m = axes.to_model(targets_trc_m)
+    if silhouettes is not None and silhouettes.video_masks is not None:
+        restrict_to_subject(silhouettes.video_masks, cameras, targets_m)
+    diagnosis = Diagnosis()  # the views' evidence judged before any solving (app.diagnosis)
+    if silhouettes is not None and settings.use_image:
+        diagnosis = check_views(view_evidence(cameras, silhouettes.frame, targets_m),
+                                "--masks" if job.masks is not None else "--videos", trc.frame_numbers,
+                                axes_hint(axes))
+    add_jumps(diagnosis, jumps, trc.frame_numbers)
     # Every keypoint scales the segments, tracked or not.
     body = prepare_body(job, names, targets_m, calibrate_on_targets=videos.triangulation is not None)
     trial_lengths = None
@@ -207,20 +225,27 @@ def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
         body = apply_lengths(body, trial_lengths)
     reader = None  # the silhouettes, each frame's read once for the tracker and the report
     if silhouettes is not None:
-        if silhouettes.video_masks is not None:
-            restrict_to_subject(silhouettes.video_masks, cameras, targets_m)
         reader = SilhouetteQualityReader(silhouettes.frame, cameras, targets_m)
     tracked = [index for index, name in enumerate(names) if name not in videos.left_to_image]
 
     use_image = settings.use_image
     tracker = Tracker(body, cameras if use_image else [], settings)
-    with tqdm(total=frame_count, desc="tracking", unit="frame", disable=True if job.quiet else None) as bar:
-        result = tracker.track([names[index] for index in tracked], targets_m[:, tracked],
-                               reader if use_image else None, progress=bar.update)
+    solved = np.flatnonzero(~jumps.dropped)  # the frames of whole-body jumps are not solved
+    source = reader if reader is None or len(solved) == frame_count else SolvedFramesSource(reader, solved)
+    with tqdm(total=len(solved), desc="tracking", unit="frame", disable=True if job.quiet else None) as bar:
+        result = tracker.track([names[index] for index in tracked], targets_m[solved][:, tracked],
+                               source if use_image else None, progress=bar.update)
+    if len(solved) < frame_count:
+        result = expand_to_frames(result, body, solved, np.asarray(trc.times, dtype=float))
+    diagnose_result(diagnosis, trc.frame_numbers, result.target_residuals, result.camera_names,
+                    result.inside_fraction)
     silhouette_report = reader.quality(videos.segmenter) if reader is not None else None
 
     # tracker.settings: as solved (a stack's image task may set the criterion)
-    return write_outputs(staging, job, tracker.settings, targets.stem, trc, body, cameras, silhouettes, result, axes,
-                         outliers[:, tracked], silhouette_report=silhouette_report,
-                         triangulation_report=videos.triangulation, extrinsics=videos.extrinsics,
-                         trial_lengths=trial_lengths)
+    report = write_outputs(staging, job, tracker.settings, targets.stem, trc, body, cameras, silhouettes, result,
+                           axes, outliers[:, tracked], silhouette_report=silhouette_report,
+                           triangulation_report=videos.triangulation, extrinsics=videos.extrinsics,
+                           trial_lengths=trial_lengths)
+    report.diagnosis = diagnosis.to_report()
+    report.write(staging / "report.json")  # again, with the diagnosis
+    return report
