@@ -251,3 +251,160 @@ def test_a_camera_name_that_cannot_name_a_file_is_said_before_the_solve_and_sani
     assert file in read_manifest(case.out).files
     assert tree_digest(case.inputs) == inputs
     assert not any(path.name.startswith("overlay") for path in case.root.rglob("*") if path.parent != case.out)
+
+
+# -- ibik batch: where it may write, what counts as done, what killed runs left ------------------
+
+BATCH_OPTIONS = ["--workers", "1", "--quiet", "--iterations", "2"]
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory):
+    """A tree of 3 generated trials (P1 with a static trial) beside nothing else of the user's."""
+    from ibik_pin.synthetic.trials import write_trial_tree
+
+    pytest.importorskip("distributed")
+    folder = tmp_path_factory.mktemp("batch_session")
+    write_trial_tree(folder / "root", trials_per_participant=(2, 1), frames=4)
+    return folder
+
+
+def _users_summary(folder: Path) -> Path:
+    _write(folder / "mine" / "summary.csv", "trial,score\nwalk,3\n")
+    return folder / "mine"
+
+
+def _a_file(folder: Path) -> Path:
+    _write(folder / "out.txt", "a file\n")
+    return folder / "out.txt"
+
+
+def _link_to_root(folder: Path) -> Path:
+    if not (folder / "root_link").is_symlink():
+        os.symlink(folder / "root", folder / "root_link")
+    return folder / "root_link"
+
+
+BATCH_REFUSED: list[tuple[str, Callable[[Path], Path], str]] = [
+    ("inside-root-a-participant", lambda f: f / "root" / "P1", r"lies inside ROOT"),
+    ("inside-root-a-trials-subfolder", lambda f: f / "root" / "P1" / "walk_1" / "results", r"lies inside ROOT"),
+    ("holding-root", lambda f: f, r"holds ROOT"),
+    ("root-through-a-link", _link_to_root, r"must not be ROOT"),
+    ("users-folder-with-their-summary", _users_summary, r"no ibik batch wrote"),
+    ("an-existing-file", _a_file, r"is an existing file"),
+]
+
+
+@pytest.mark.parametrize(("outroot", "expected"), [pytest.param(o, e, id=i) for i, o, e in BATCH_REFUSED])
+def test_batch_refuses_an_outroot_among_the_trials_or_of_the_users(session, outroot, expected, capfd):
+    out = outroot(session)
+    before = tree_digest(session)
+
+    code, lines = run_cli(["batch", str(session / "root"), "--out", str(out), *BATCH_OPTIONS], capfd)
+
+    assert code == 2, lines
+    assert len(lines) == 1 and lines[0].startswith("ibik: error: --out "), lines
+    assert re.search(expected, lines[0]), lines
+    assert tree_digest(session) == before
+
+
+def _summary(outroot: Path) -> dict[str, dict[str, str]]:
+    import csv
+
+    with open(outroot / "summary.csv", newline="") as stream:
+        return {row["trial"]: row for row in csv.DictReader(stream)}
+
+
+def _runs_log(outroot: Path) -> list[dict[str, str]]:
+    import csv
+
+    with open(outroot / "runs.csv", newline="") as stream:
+        return list(csv.DictReader(stream))
+
+
+def _dead_pid() -> int:
+    import subprocess
+    import sys
+
+    process = subprocess.Popen([sys.executable, "-c", "pass"])
+    process.wait()
+    return process.pid
+
+
+def _staging(folder: Path, name: str, pid: int | None) -> Path:
+    """A folder as a run's staging folder looks: with a staging manifest of `pid` on this machine
+    (None: no manifest, a folder of the user's that only looks like one)."""
+    import socket
+
+    path = folder / name
+    _write(path / "joints.trc", "half written")
+    if pid is not None:
+        (path / MARKER).write_text(json.dumps({"written_by": "ibik_pin", "manifest": 1, "state": "staging",
+                                               "files": {}, "host": socket.gethostname(), "pid": pid}))
+    return path
+
+
+@pytest.fixture(scope="module")
+def rerun(session, tmp_path_factory):
+    """A first batch run, then what users and killed runs do to OUTROOT, then a second run."""
+    from ibik_pin.cli import main as cli_main
+
+    outroot = tmp_path_factory.mktemp("batch_out") / "outroot"
+    assert cli_main(["batch", str(session / "root"), "--out", str(outroot), *BATCH_OPTIONS]) == 0
+    first_summary, first_log = _summary(outroot), _runs_log(outroot)
+    (outroot / "P1" / "walk_1" / "model.osim").unlink()
+    q_csv = outroot / "P1" / "walk_2" / "q.csv"
+    q_csv.write_bytes(q_csv.read_bytes()[: q_csv.stat().st_size // 2])
+    set_aside = outroot / "P2" / ".walk_1.previous.0123456789ab"
+    kept_digest = tree_digest(outroot / "P2" / "walk_1")
+    os.replace(outroot / "P2" / "walk_1", set_aside)  # a publish killed between its two moves
+    dead = _staging(outroot / "P1", ".walk_2.staging.k1ll3d", _dead_pid())
+    alive = _staging(outroot / "P1", ".walk_1.staging.a1ive", os.getpid())
+    users = _staging(outroot / "P1", ".walk_1.staging.mine", None)
+    (outroot / ".ibik_batch").unlink()  # as an earlier version left it: its summary.csv alone
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        code = cli_main(["batch", str(session / "root"), "--out", str(outroot), *BATCH_OPTIONS])
+    return {"outroot": outroot, "code": code, "first_summary": first_summary, "first_log": first_log,
+            "summary": _summary(outroot), "log": _runs_log(outroot), "kept_digest": kept_digest,
+            "set_aside": set_aside, "dead": dead, "alive": alive, "users": users}
+
+
+def test_batch_retracks_a_trial_whose_model_osim_was_deleted(rerun):
+    assert rerun["code"] == 0
+    assert rerun["summary"]["P1/walk_1"]["status"] == "ok"
+    assert (rerun["outroot"] / "P1" / "walk_1" / "model.osim").is_file()
+
+
+def test_batch_retracks_a_trial_whose_output_was_cut_short(rerun):
+    assert rerun["summary"]["P1/walk_2"]["status"] == "ok"
+    q_csv = rerun["outroot"] / "P1" / "walk_2" / "q.csv"
+    assert read_manifest(q_csv.parent).files["q.csv"] == q_csv.stat().st_size
+
+
+def test_batch_puts_back_an_output_a_killed_publish_had_set_aside(rerun):
+    assert rerun["summary"]["P2/walk_1"]["status"] == "skipped"
+    assert not rerun["set_aside"].exists()
+    assert tree_digest(rerun["outroot"] / "P2" / "walk_1") == rerun["kept_digest"]
+
+
+def test_batch_removes_a_dead_runs_staging_folder_and_nothing_it_cannot_prove_its_own(rerun):
+    assert not rerun["dead"].exists()
+    assert (rerun["alive"] / "joints.trc").read_text() == "half written"  # its run may still be going
+    assert (rerun["users"] / "joints.trc").read_text() == "half written"  # no manifest: the user's
+
+
+def test_batch_keeps_every_runs_record_and_a_skipped_trials_worker_and_time(rerun):
+    first_ids = {row["batch_run"] for row in rerun["first_log"]}
+    assert len(first_ids) == 1 and len(rerun["first_log"]) == 3
+    assert rerun["log"][:3] == rerun["first_log"]  # the first run's rows, as written then
+    assert len(rerun["log"]) == 6 and len({row["batch_run"] for row in rerun["log"]}) == 2
+    skipped, earlier = rerun["summary"]["P2/walk_1"], rerun["first_summary"]["P2/walk_1"]
+    assert earlier["status"] == "ok" and earlier["worker"] != "" and float(earlier["seconds"]) > 0.0
+    assert (skipped["worker"], skipped["seconds"]) == (earlier["worker"], earlier["seconds"])
+    assert skipped["tracked_in"] == earlier["tracked_in"] == first_ids.pop()
+
+
+def test_batch_takes_an_earlier_versions_outroot_by_its_summary_and_marks_it(rerun):
+    marker = json.loads((rerun["outroot"] / ".ibik_batch").read_text())
+    assert marker["written_by"] == "ibik_pin"
