@@ -113,6 +113,21 @@ def test_a_flat_criterion_keeps_the_calibrated_lengths_unless_they_cannot_reach(
     assert short.evidence["left_leg"]["calibrated_reaches"] is False
 
 
+def test_keeping_the_sum_moves_the_knee_along_the_leg_and_keeps_thigh_plus_shank():
+    legs = _leg(30, np.linspace(20.0, 70.0, 30))
+    # The right sum, split 12 mm the wrong way: only the split is to be found.
+    calibrated = {"left_thigh": THIGH - 0.012, "left_shank": SHANK + 0.012}
+    frames = [({"LHip": leg[0], "LKnee": leg[1], "LAnkle": leg[2]}, [(_PeakAt(leg[1]), 1.0)]) for leg in legs]
+    refined = refine_from_images(_Body(), calibrated, frames, factors=np.linspace(0.94, 1.06, 49), swivels=72,
+                                 keep_sum=True)
+    assert refined.lengths["left_thigh"] + refined.lengths["left_shank"] == pytest.approx(THIGH + SHANK, abs=1e-12)
+    assert refined.lengths["left_thigh"] == pytest.approx(THIGH, abs=0.002)
+    assert refined.evidence["left_leg"]["factors"][1] == pytest.approx(refined.lengths["left_shank"]
+                                                                        / calibrated["left_shank"], rel=1e-12)
+    with pytest.raises(InputError, match="choose one"):
+        refine_from_images(_Body(), calibrated, frames, keep_sum=True, keep_ratio=True)
+
+
 def test_bad_arguments_are_refused_with_what_was_expected():
     with pytest.raises(InputError, match="targets: expected shape"):
         reach_bounds(NAMES, np.zeros((4, 2, 3)))

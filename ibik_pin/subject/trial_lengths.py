@@ -197,6 +197,14 @@ def _candidates(root: np.ndarray, middle: np.ndarray, end: np.ndarray, uppers: n
     return points, reaches
 
 
+def _lower_factors(upper: np.ndarray, lower: np.ndarray | None, lengths: Mapping[str, float],
+                   limb: Limb) -> np.ndarray:
+    """The lower segment's factors of a grid; None: those that keep the limb's sum with `upper`."""
+    if lower is not None:
+        return lower
+    return 1.0 + (1.0 - upper) * lengths[limb.upper] / lengths[limb.lower]
+
+
 def refine_from_images(
     body: BodyModel,
     lengths: Mapping[str, float],
@@ -208,6 +216,7 @@ def refine_from_images(
     min_gain: float = 0.0,
     limbs: Sequence[str] | None = None,
     keep_ratio: bool = False,
+    keep_sum: bool = False,
 ) -> TrialLengths:
     """Each limb's two lengths, chosen on a grid of factors, by how well the trial's silhouettes
     are explained with them.
@@ -233,6 +242,8 @@ def refine_from_images(
         swivels: points per circle.
         limbs: the limbs refined (default: every limb of LIMBS whose keypoints the body has).
         keep_ratio: scale both segments of a limb by the same factor (the static's split kept).
+        keep_sum: the factors on the upper segment only, the lower one taking up the difference (the
+            limb's sum kept, its split between the two segments chosen).
 
     Returns:
         The lengths, the limbs' evidence (frames, factors chosen, gain, unreachable frames).
@@ -245,9 +256,11 @@ def refine_from_images(
     chosen = [name for name in _limbs(limbs) if all(getattr(LIMBS[name], k) in body.keypoints
                                                     for k in ("root", "middle", "end"))
               and LIMBS[name].upper in lengths and LIMBS[name].lower in lengths]
-    grid_upper, grid_lower = ((factors, factors) if keep_ratio else
+    if keep_ratio and keep_sum:
+        raise InputError("keep_ratio, keep_sum: choose one (the ratio or the sum of a limb's segments kept)")
+    grid_upper, grid_lower = ((factors, factors) if keep_ratio else (factors, None) if keep_sum else
                               (g.reshape(-1) for g in np.meshgrid(factors, factors, indexing="ij")))
-    identity = int(np.argmin(np.abs(grid_upper - 1.0) + np.abs(grid_lower - 1.0)))
+    identity = int(np.argmin(np.abs(grid_upper - 1.0) + (0.0 if grid_lower is None else np.abs(grid_lower - 1.0))))
     ids = {name: body.frame_ids([LIMBS[name].root, LIMBS[name].middle, LIMBS[name].end]) for name in chosen}
     scores = {name: np.zeros(grid_upper.size) for name in chosen}
     unreachable = {name: np.zeros(grid_upper.size) for name in chosen}
@@ -268,7 +281,8 @@ def refine_from_images(
             root, middle, end = positions_of(keypoints, ids[name])
             limb = LIMBS[name]
             points, reaches = _candidates(root, middle, end, grid_upper * lengths[limb.upper],
-                                          grid_lower * lengths[limb.lower], int(swivels), reach_tolerance)
+                                          _lower_factors(grid_upper, grid_lower, lengths, limb) * lengths[limb.lower],
+                                          int(swivels), reach_tolerance)
             unreachable[name] += ~reaches
             placements.append(points)
             moves.append(ids[name][1])
@@ -305,10 +319,11 @@ def refine_from_images(
         if allowed[identity] and (gain is None or gain <= min_gain):
             best = identity
         limb = LIMBS[name]
+        lower = _lower_factors(grid_upper, grid_lower, before, limb)
         refined[limb.upper] = float(grid_upper[best]) * before[limb.upper]
-        refined[limb.lower] = float(grid_lower[best]) * before[limb.lower]
+        refined[limb.lower] = float(lower[best]) * before[limb.lower]
         evidence[name] = {"kind": "images", "frames": count, "factors": [float(grid_upper[best]),
-                                                                          float(grid_lower[best])],
+                                                                          float(lower[best])],
                           "gain": gain, "calibrated_reaches": bool(allowed[identity]),
                           "unreachable_frames_calibrated": int(unreachable[name][identity])}
     return TrialLengths(refined, before, evidence)
