@@ -25,7 +25,7 @@ from ibik_pin.io.trc import TrcData, read_trc, write_trc
 from ibik_pin.readahead.frame_images import frame_images
 from ibik_pin.subject.calibration import calibrate_static_trial
 from ibik_pin.subject.scaling import keypoint_lengths, segment_lengths_from_keypoints
-from ibik_pin.subject.trial_lengths import refine_from_images, refine_from_reach
+from ibik_pin.subject.trial_lengths import DEFAULT_FACTORS, refine_from_images, refine_from_reach
 from ibik_pin.tasks.image import ImageTask
 from ibik_pin.tasks.silhouette_axis import SilhouetteAxisTask
 from ibik_pin.tracking.settings import TrackingSettings
@@ -38,6 +38,8 @@ SEGMENT_CHILDREN = {"left_thigh": "LKnee", "left_shank": "LAnkle", "right_thigh"
                     "left_upper_arm": "LElbow", "left_forearm": "LWrist", "right_upper_arm": "RElbow",
                     "right_forearm": "RWrist"}
 LENGTHS = ("static", "reach", "images", "oracle")
+#: The factors tried on both segments of a leg at once (trial_lengths' default grid).
+LEG_FACTORS = DEFAULT_FACTORS
 
 
 def _write_static(inputs: ConditionInputs, lengths: dict[str, float], wanted: dict[str, float], name: str) -> Path:
@@ -76,7 +78,8 @@ def oracle_static(inputs: ConditionInputs) -> tuple[Path, dict]:
 
 
 def image_static(inputs: ConditionInputs, estimate: TrcData, views: int, silhouettes: str,
-                 settings: TrackingSettings | None = None, smoothing_frames: int = 3) -> tuple[Path, dict]:
+                 settings: TrackingSettings | None = None, smoothing_frames: int = 3,
+                 factors: np.ndarray = LEG_FACTORS) -> tuple[Path, dict]:
     """The static with the legs' lengths the first `views` cameras' silhouettes prefer around the
     pose `estimate` (a PIK run's joints.trc), the arms' by reach."""
     if views < 2:
@@ -107,7 +110,8 @@ def image_static(inputs: ConditionInputs, estimate: TrcData, views: int, silhoue
             keypoints = {name: estimate.positions[frame, k] for k, name in enumerate(estimate.marker_names)}
             yield keypoints, [(image_task, 1.0), (axis_task, settings.axis_weight)]
 
-    legs = refine_from_images(body, model_lengths, frames(), limbs=("left_leg", "right_leg"), keep_ratio=True)
+    legs = refine_from_images(body, model_lengths, frames(), factors=factors, limbs=("left_leg", "right_leg"),
+                              keep_ratio=True)
     arms = refine_from_reach(model_lengths, targets.marker_names, targets.positions, limbs=("left_arm", "right_arm"),
                              smoothing_frames=smoothing_frames)
     lengths = static_lengths(inputs)
