@@ -106,7 +106,7 @@ def variant(name: str) -> Variant:
 
 
 # Settings whose default is None and whose value is otherwise a number.
-FLOAT_OR_NONE = ("step_tolerance",)
+FLOAT_OR_NONE = ("step_tolerance", "target_step_tolerance")
 
 
 def parse_settings(pairs: typing.Iterable[str]) -> dict:

@@ -104,6 +104,11 @@ class Tracker:
                              f"found {self.settings.image_stop!r}")
         if int(self.settings.target_iterations) < 1:
             raise InputError(f"target_iterations: expected at least 1, found {self.settings.target_iterations}")
+        tolerance = self.settings.target_step_tolerance
+        if tolerance is not None and (isinstance(tolerance, bool) or not isinstance(tolerance, (int, float))
+                                      or not np.isfinite(tolerance) or tolerance <= 0):
+            raise InputError(f"target_step_tolerance: expected None or a positive number of radians, found "
+                             f"{tolerance!r}", parameter="target_step_tolerance")
         held = ~body.limb_coordinates
         # Holds the trunk during the image steps (_solve). A strict level: ik and liegeois, which merge
         # every level above the image into one task (eq. 3, 4), run the paper's scheme instead.
@@ -176,7 +181,8 @@ class Tracker:
             if above_image:
                 self.solver.solve(configuration, above_image, iterations=1)
             return solved
-        self.solver.solve(configuration, plan.blind_levels(), iterations=int(self.settings.target_iterations))
+        self.solver.solve(configuration, plan.blind_levels(), iterations=int(self.settings.target_iterations),
+                          tolerance=self.settings.target_step_tolerance)
         self._trunk_hold.set_reference(configuration.q)
         hints = self._swivel_hints(configuration, free) if search else []
         hinted = plan.with_level_above_image(hints) if hints else levels
