@@ -20,6 +20,7 @@ from pathlib import Path
 
 import pytest
 
+from ibik_pin.app import outdir
 from ibik_pin.app.manifest import MARKER, read_manifest
 from ibik_pin.cli import main
 from ibik_pin.exceptions import IbikWarning
@@ -362,8 +363,9 @@ def rerun(session, tmp_path_factory):
     alive = _staging(outroot / "P1", ".walk_1.staging.a1ive", os.getpid())
     users = _staging(outroot / "P1", ".walk_1.staging.mine", None)
     (outroot / ".ibik_batch").unlink()  # as an earlier version left it: its summary.csv alone
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(), pytest.MonkeyPatch.context() as patch:
         warnings.simplefilter("ignore")
+        patch.setattr(outdir, "STALE_SECONDS", 0.0)  # set aside just now, as if long ago
         code = cli_main(["batch", str(session / "root"), "--out", str(outroot), *BATCH_OPTIONS])
     return {"outroot": outroot, "code": code, "first_summary": first_summary, "first_log": first_log,
             "summary": _summary(outroot), "log": _runs_log(outroot), "kept_digest": kept_digest,
@@ -408,3 +410,14 @@ def test_batch_keeps_every_runs_record_and_a_skipped_trials_worker_and_time(reru
 def test_batch_takes_an_earlier_versions_outroot_by_its_summary_and_marks_it(rerun):
     marker = json.loads((rerun["outroot"] / ".ibik_batch").read_text())
     assert marker["written_by"] == "ibik_pin"
+
+
+def test_a_set_aside_output_of_a_publish_still_going_is_left_alone(tmp_path):
+    out = tmp_path / "out"
+    outdir.publish(outdir.make_staging(out), out)
+    aside = tmp_path / f"{outdir.previous_prefix(out)}0123456789ab"
+    os.replace(out, aside)  # the instant between a publish's two moves
+
+    assert outdir.remove_leftovers(out) == []
+
+    assert aside.is_dir() and not out.exists()

@@ -17,6 +17,7 @@ import os
 import re
 import shutil
 import tempfile
+import time
 import uuid
 from collections.abc import Iterable, Sequence
 from pathlib import Path
@@ -25,6 +26,7 @@ from ibik_pin.app.manifest import (
     MARKER,
     has_an_output_name,
     listed_files,
+    process_is_gone,
     read_manifest,
     user_paths,
     write_manifest,
@@ -32,13 +34,15 @@ from ibik_pin.app.manifest import (
 from ibik_pin.exceptions import InputError
 
 __all__ = ["MARKER", "OutputFolderError", "check_outdir", "file_name_part", "kept_message", "make_staging",
-           "overlay_file_names", "previous_prefix", "publish", "staging_prefix"]
+           "overlay_file_names", "previous_prefix", "publish", "remove_leftovers", "staging_prefix"]
 
 # A staging or set-aside folder's name starts with at most this much of OUTDIR's name, so that
 # it fits in a file name (255 bytes) whatever OUTDIR's length.
 NAME_PART_BYTES = 100
 # Room left in a path for the longest name written inside OUTDIR (an overlay video's is cut to it).
 LONGEST_OUTPUT_NAME = 120
+# An earlier output set aside longer ago than this is a killed publish's, not one in progress.
+STALE_SECONDS = 60.0
 _UNSAFE_IN_A_NAME = re.compile(r'[/\\\x00-\x1f:*?"<>|]')
 
 
@@ -150,9 +154,11 @@ def check_outdir(out: str | os.PathLike[str], inputs: Iterable[Path | None]) -> 
 def make_staging(out: Path) -> Path:
     """A new empty folder beside OUTDIR (created with its parents) with a manifest in state
     "staging", where the run writes; its permissions are those of a folder made by the user (not
-    mkdtemp's 0700)."""
+    mkdtemp's 0700). What killed runs into the same OUTDIR left beside it goes first
+    (remove_leftovers)."""
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
+        remove_leftovers(out)
         staging = Path(tempfile.mkdtemp(prefix=staging_prefix(out), dir=out.parent))
         umask = os.umask(0)
         os.umask(umask)
@@ -258,3 +264,42 @@ def overlay_file_names(camera_names: Sequence[str]) -> dict[str, str]:
             candidate, number = f"{stem}_{number}.mp4", number + 1
         names[camera] = candidate
     return names
+
+
+def remove_leftovers(out: Path) -> list[Path]:
+    """Remove what killed runs into OUTDIR `out` left beside it, where it can be proven
+    theirs; returns what was removed or put back.
+
+    - a staging folder (named by app.outdir.staging_prefix, its manifest in state "staging") whose
+      process ran on this machine and is gone;
+    - an earlier output set aside by a publish that was killed (named by previous_prefix, a
+      complete manifest, set aside more than STALE_SECONDS ago: a publish moves in microseconds):
+      put back as OUTDIR when OUTDIR is missing, else removed.
+    Anything else, and the staging folders of runs still going or on other machines, stay.
+    """
+    handled: list[Path] = []
+    staging, previous = staging_prefix(out), previous_prefix(out)
+    try:
+        candidates = sorted(path for path in out.parent.iterdir() if path.name.startswith((staging, previous)))
+    except OSError:  # no parent folder yet
+        return handled
+    for path in candidates:
+        try:  # another run may rename or remove any of these meanwhile: then it is not a leftover
+            if path.is_symlink() or not path.is_dir():
+                continue
+            manifest = read_manifest(path)
+            if manifest is None:
+                continue
+            if path.name.startswith(staging) and manifest.state == "staging" and process_is_gone(manifest):
+                shutil.rmtree(path)
+                handled.append(path)
+            elif (path.name.startswith(previous) and manifest.state == "complete"
+                  and time.time() - path.stat().st_ctime > STALE_SECONDS):  # a rename sets st_ctime
+                if not os.path.lexists(out):
+                    os.replace(path, out)
+                else:
+                    shutil.rmtree(path)
+                handled.append(path)
+        except OSError:
+            continue
+    return handled

@@ -7,6 +7,7 @@ trials, or become trials), or an existing folder without the marker that is not 
 An OUTROOT of an earlier version of ibik (no marker, but a summary.csv whose header is the batch's
 own) is taken as the batch's and gets the marker.
 
+Leftovers of killed runs beside a trial's OUTDIR are removed by app.outdir.remove_leftovers.
 A trial is complete when its OUTDIR's manifest (app.manifest) lists every output the batch expects
 and every listed file is there with its size; an old plain-text marker needs the files present.
 """
@@ -14,12 +15,10 @@ and every listed file is there with its size; an old plain-text marker needs the
 from __future__ import annotations
 
 import json
-import os
-import shutil
 from pathlib import Path
 
-from ibik_pin.app.manifest import MARKER, read_manifest
-from ibik_pin.app.outdir import OutputFolderError, previous_prefix, staging_prefix
+from ibik_pin.app.manifest import read_manifest
+from ibik_pin.app.outdir import OutputFolderError, remove_leftovers
 from ibik_pin.io.files import write_text_atomically
 
 __all__ = ["BATCH_MARKER", "SUMMARY_HEADER_START", "check_outroot", "claim_outroot", "missing_outputs",
@@ -96,38 +95,3 @@ def missing_outputs(out: Path, expected: tuple[str, ...]) -> str | None:
         if found != size:
             return f"{name} is {found} bytes, {size} when written"
     return None
-
-
-def remove_leftovers(out: Path) -> list[Path]:
-    """Remove what killed runs into the trial's OUTDIR `out` left beside it, where it can be proven
-    theirs; returns what was removed or put back.
-
-    - a staging folder (named by app.outdir.staging_prefix, its manifest in state "staging") whose
-      process ran on this machine and is gone;
-    - an earlier output set aside by a publish that was killed (named by previous_prefix, a
-      complete manifest): put back as OUTDIR when OUTDIR is missing, else removed.
-    Anything else, and the staging folders of runs still going or on other machines, stay.
-    """
-    from ibik_pin.app.manifest import process_is_gone
-
-    handled: list[Path] = []
-    if not out.parent.is_dir():
-        return handled
-    staging, previous = staging_prefix(out), previous_prefix(out)
-    for path in sorted(out.parent.iterdir()):
-        if path.is_symlink() or not path.is_dir() or not (path / MARKER).is_file():
-            continue
-        manifest = read_manifest(path)
-        if manifest is None:
-            continue
-        if path.name.startswith(staging) and manifest.state == "staging" and process_is_gone(manifest):
-            shutil.rmtree(path, ignore_errors=True)
-            handled.append(path)
-        elif path.name.startswith(previous) and manifest.state == "complete":
-            if not os.path.lexists(out):
-                os.replace(path, out)
-            else:
-                shutil.rmtree(path, ignore_errors=True)
-            handled.append(path)
-    return handled
-
