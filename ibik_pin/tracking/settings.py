@@ -64,8 +64,8 @@ class TrackingSettings:
         target_step_tolerance: those steps end once a step's norm |dq| falls below this [rad]
             (None: always `target_iterations`); the frame's image steps carry the targets' levels
             above the image's and go on meeting them. 0.02 (default): on the real-motion benchmark
-            (6 clips, 2 and 4 views, clean and with defects) every judged error within 0.23 mm of
-            all five steps', the aggregates within 0.05 mm (docs/method.md, "Speed").
+            (6 clips, 2 and 4 views, clean and with defects) every judged error within 0.21 mm of
+            all five steps', the aggregates within 0.04 mm (docs/method.md, "Speed").
         step_tolerance: stop a frame's main solve (the image steps, or the blind steps without
             the image) once a step's norm |dq| falls below this [rad]; None: always `iterations`.
         image_stop: where a frame's image steps end. "peak" (default): once the image criterion
