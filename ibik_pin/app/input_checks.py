@@ -40,6 +40,9 @@ OUTLIER_DISTANCE_M = 2.5
 JUMP_DISTANCE_M = 0.2
 MAX_JUMP_RUN = 3
 MAX_BODY_SPEED_M_S = 12.0
+# A static frame with at most this many markers metres from the others holds corrupt cells; with
+# more, the whole body is in other units than declared.
+MAX_CORRUPT_MARKERS = 2
 # A pinhole camera's focal length is at least this fraction of its image width (a field of view
 # under 177 degrees; a fisheye lens of 170 degrees has about 0.044).
 MIN_FOCAL_WIDTHS = 0.01
@@ -75,7 +78,9 @@ def check_trc(option: str, path: Path, data: TrcData, positions_m: np.ndarray) -
 def check_static_cells(option: str, path: Path, data: TrcData, positions_m: np.ndarray) -> None:
     """Refuse a static trial with a value farther than OUTLIER_DISTANCE_M from its frame's other
     markers (InputError naming the file, the frame, the marker, the coordinate and its value): the
-    subject's lengths are measured on it, so one corrupt cell would make a limb metres long."""
+    subject's lengths are measured on it, so one corrupt cell would make a limb metres long. Only
+    cells of at most MAX_CORRUPT_MARKERS markers of a frame: a whole body far apart is in the wrong
+    units, which check_trc names."""
     finite = np.isfinite(positions_m)
     if not finite.any():
         return
@@ -83,6 +88,8 @@ def check_static_cells(option: str, path: Path, data: TrcData, positions_m: np.n
         warnings.simplefilter("ignore", RuntimeWarning)  # a frame without any value has no median
         median = np.nanmedian(np.where(finite, positions_m, np.nan), axis=1, keepdims=True)
         far = np.where(finite & np.isfinite(median), np.abs(positions_m - median), 0.0)
+    markers_far = (far > OUTLIER_DISTANCE_M).any(axis=2)
+    far[markers_far.sum(axis=1) > MAX_CORRUPT_MARKERS] = 0.0
     if not (far > OUTLIER_DISTANCE_M).any():
         return
     frame, marker, axis = np.unravel_index(int(np.argmax(far)), far.shape)

@@ -64,12 +64,12 @@ def _trc_in_metres(option: str, path: Path, c3d_mapping: Path | None = None) -> 
     if data.units not in METRES_PER_UNIT:
         raise FileFormatError(f"{path}: units {data.units!r} are not one of m, cm, mm")
     positions_m = data.positions * METRES_PER_UNIT[data.units]
+    if option != "--targets":  # a static trial's lengths are measured: a corrupt cell is refused, named
+        check_static_cells(option, path, data, positions_m)
     check_trc(option, path, data, positions_m)  # first: in the wrong unit, every target is an outlier
     outliers = np.zeros(positions_m.shape[:2], dtype=bool)
     if option == "--targets":
         positions_m, outliers = drop_outlier_targets(option, data.marker_names, positions_m)
-    else:  # a static trial's lengths are measured: a corrupt cell is refused, not dropped
-        check_static_cells(option, path, data, positions_m)
     return data, positions_m, outliers
 
 
