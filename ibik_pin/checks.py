@@ -17,7 +17,23 @@ from numba import njit
 
 from ibik_pin.exceptions import InputError
 
-__all__ = ["as_finite_array", "as_image_size", "as_mask", "as_radii"]
+__all__ = ["as_finite_array", "as_float_array", "as_image_size", "as_mask", "as_radii", "require_instance"]
+
+
+def require_instance(value: object, kinds: type | tuple[type, ...], name: str, expected: str) -> None:
+    """Raise InputError naming `name` unless `value` is one of `kinds` (`expected` says what in words)."""
+    if not isinstance(value, kinds):
+        raise InputError(f"{name}: expected {expected}, found {type(value).__name__}", parameter=name)
+
+
+def as_float_array(value, name: str) -> np.ndarray:
+    """`value` as a new float64 array, or InputError naming `name` when it holds no numbers (text,
+    objects): numpy's own error would name neither the parameter nor the value."""
+    try:
+        return np.array(value, dtype=float)
+    except (TypeError, ValueError) as error:
+        raise InputError(f"{name}: expected numbers, found {type(value).__name__} ({error})",
+                         parameter=name) from None
 
 
 @njit(cache=True, nogil=True)

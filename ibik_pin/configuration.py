@@ -9,7 +9,7 @@ import numpy as np
 import pinocchio as pin
 from numba import njit
 
-from ibik_pin.checks import all_finite
+from ibik_pin.checks import all_finite, as_float_array, require_instance
 from ibik_pin.exceptions import InputError
 
 if TYPE_CHECKING:
@@ -91,6 +91,7 @@ class Configuration:
     """
 
     def __init__(self, model: pin.Model, q: np.ndarray | None = None) -> None:
+        require_instance(model, pin.Model, "model", "a Pinocchio model (pinocchio.Model)")
         self.model = model
         self.data = model.createData()
         # The frames' placements in data, by reference (they follow every update): reading them
@@ -121,7 +122,7 @@ class Configuration:
         self.update()
 
     def _checked(self, q: np.ndarray) -> np.ndarray:
-        q = np.array(q, dtype=float).reshape(-1)
+        q = as_float_array(q, "q").reshape(-1)
         if q.shape != (self.model.nq,):
             raise InputError(f"configuration q must have shape ({self.model.nq},), got {q.shape}")
         if not all_finite(q):

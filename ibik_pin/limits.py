@@ -6,6 +6,7 @@ import numpy as np
 import pinocchio as pin
 from numba import njit
 
+from ibik_pin.checks import require_instance
 from ibik_pin.exceptions import InputError
 
 
@@ -26,6 +27,7 @@ class JointLimits:
         max_step: float = 0.5,
         max_root_translation: float = 0.5,
     ) -> None:
+        require_instance(model, pin.Model, "model", "a Pinocchio model (pinocchio.Model)")
         if not (max_step > 0 and max_root_translation > 0):
             raise InputError(
                 f"max_step and max_root_translation must be positive, got {max_step}, "

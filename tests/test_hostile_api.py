@@ -17,14 +17,21 @@ from ibik_pin.app.track import run_track
 from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import IbikError, InputError
 from ibik_pin.human import load_human
+from ibik_pin.io.asf import read_asf
 from ibik_pin.io.bvh import read_bvh
 from ibik_pin.io.calibration import read_calibration, write_calibration
+from ibik_pin.io.export import write_model_bvh, write_model_mot, write_q_csv
 from ibik_pin.io.keypoints import read_keypoints
 from ibik_pin.io.masks import list_mask_files, read_mask
 from ibik_pin.io.mot import read_mot
+from ibik_pin.io.osim import write_osim_model
 from ibik_pin.io.trc import read_trc, write_trc
 from ibik_pin.io.video import VideoReader
+from ibik_pin.limits import JointLimits
 from ibik_pin.solvers import make_solver
+from ibik_pin.subject.calibration import calibrate_subject
+from ibik_pin.subject.scaling import scale_from_stature
+from ibik_pin.subject.urdf import write_subject_urdf
 from ibik_pin.tasks import FramePositionTask, PostureTask, View
 from ibik_pin.tracking.settings import TrackingSettings
 from ibik_pin.vision.camera import select_cameras
@@ -114,6 +121,26 @@ CASES: list[tuple[str, Callable[[Case], object], str]] = [
     ("video-reader-a-number", lambda c: VideoReader(0), r"^path: expected a path .*int"),
     ("camera-project-text", lambda c: _camera(c).project("0 0 1"), r"^points_world: expected an array"),
     ("select-cameras-from-a-string", lambda c: select_cameras("cam01", ["cam01"]), r"^cameras: expected a list"),
+    ("make-solver-limits-a-string", lambda c: make_solver("qp", limits="model"), r"^limits: expected a JointLimits"),
+    ("configuration-of-a-name", lambda c: Configuration("human"), r"^model: expected a Pinocchio model"),
+    ("configuration-q-as-text", lambda c: Configuration(_body().model, "0 0 0"), r"^q: expected numbers"),
+    ("joint-limits-of-a-body", lambda c: JointLimits(_body()), r"^model: expected a Pinocchio model .*BodyModel"),
+    ("calibrate-subject-body-a-path", lambda c: calibrate_subject(str(c.static), ["Hip"], [[[0.0, 1.0, 0.0]]]),
+     r"^body: expected a BodyModel"),
+    ("calibrate-subject-positions-text", lambda c: calibrate_subject(_body(), ["Hip"], "1 2 3"),
+     r"^positions: expected numbers"),
+    ("scale-from-stature-in-words", lambda c: scale_from_stature(_body(), "1.75 m"), r"^stature_m: expected a number"),
+    ("write-q-csv-model-a-body", lambda c: write_q_csv(c.root / "q.csv", _body(), [0.0], [[0.0] * 45]),
+     r"^model: expected a Pinocchio model .*BodyModel's \.model"),
+    ("write-mot-q-as-text", lambda c: write_model_mot(c.root / "m.mot", _body().model, [0.0], "q"),
+     r"^q: expected numbers"),
+    ("write-bvh-body-a-model", lambda c: write_model_bvh(c.root / "m.bvh", _body().model, [[0.0] * 45], 0.01),
+     r"^body: expected a BodyModel"),
+    ("write-osim-body-a-path", lambda c: write_osim_model(c.root / "m.osim", str(c.static)),
+     r"^body: expected a BodyModel"),
+    ("write-subject-urdf-body-none", lambda c: write_subject_urdf(None, c.root / "s.urdf"),
+     r"^body: expected a BodyModel"),
+    ("read-asf-a-number", lambda c: read_asf(3), r"^path: expected a path .*int"),
 ]
 
 
@@ -132,7 +159,7 @@ def test_a_wrong_type_at_a_public_entry_point_is_an_input_error_naming_it(case, 
 
 
 def test_the_cases_are_distinct():
-    assert len(CASES) >= 25 and len({name for name, _, _ in CASES}) == len(CASES)
+    assert len(CASES) >= 40 and len({name for name, _, _ in CASES}) == len(CASES)
 
 
 def test_the_right_types_still_pass_the_boundary(case):

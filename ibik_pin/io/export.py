@@ -19,6 +19,7 @@ import numpy as np
 import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
+from ibik_pin.checks import as_float_array, require_instance
 from ibik_pin.exceptions import InputError
 from ibik_pin.io.bvh_writer import write_bvh
 from ibik_pin.io.files import write_text_atomically
@@ -285,6 +286,7 @@ def write_model_bvh(
             not of unit norm, ``frame_time`` is not positive, the model holds a joint BVH cannot
             hold, or the file cannot be written.
     """
+    require_instance(body, BodyModel, "body", "a BodyModel (ibik_pin.human.load_human)")
     model = body.model
     q = _check_configurations(model, q)
     if not np.isfinite(frame_time) or frame_time <= 0.0:
@@ -361,7 +363,8 @@ def _joint_kind(model: pin.Model, joint_id: int) -> str:
 
 def _check_configurations(model: pin.Model, q: np.ndarray, normalise: bool = True) -> np.ndarray:
     """q as a finite (F, nq) float array, free-flyer quaternions normalised if asked."""
-    q = np.array(q, dtype=float)
+    require_instance(model, pin.Model, "model", "a Pinocchio model (pinocchio.Model; a BodyModel's .model)")
+    q = as_float_array(q, "q")
     if q.ndim != 2 or q.shape[1] != model.nq:
         raise InputError(
             f"q: expected shape (F, {model.nq}) for model {model.name!r}, got {q.shape}"
@@ -389,7 +392,7 @@ def _check_motion(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Times (F,) and configurations (F, nq), checked (see :func:`_check_configurations`)."""
     q = _check_configurations(model, q, normalise)
-    times = np.asarray(times, dtype=float)
+    times = as_float_array(times, "times")
     if times.shape != (q.shape[0],) or not np.all(np.isfinite(times)):
         raise InputError(
             f"times: expected {q.shape[0]} finite times [s], shape ({q.shape[0]},), "

@@ -35,6 +35,7 @@ import numpy as np
 import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
+from ibik_pin.checks import require_instance
 from ibik_pin.exceptions import InputError
 from ibik_pin.io.files import write_text_atomically
 from ibik_pin.io.skeleton import joint_group_name
@@ -234,6 +235,7 @@ def write_osim_model(path: str | os.PathLike[str], body: BodyModel, name: str = 
         InputError: The model holds a joint an OpenSim model here cannot hold (module docstring),
             or the file cannot be written.
     """
+    require_instance(body, BodyModel, "body", "a BodyModel (ibik_pin.human.load_human)")
     model = body.model
     bodies = osim_bodies(body)
     body_of_joint = {joint_id: index for index, item in enumerate(bodies) for joint_id in item.joint_ids}

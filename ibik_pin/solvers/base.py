@@ -261,6 +261,9 @@ class Solver(ABC):
             valid = False
         if not valid:
             raise InputError(f"damping: expected a positive finite number [m/rad], got {damping!r}")
+        if limits is not None and not isinstance(limits, JointLimits):
+            raise InputError(f"limits: expected a JointLimits (ibik_pin.limits) or None, found {type(limits).__name__}",
+                             parameter="limits")
         self.limits = limits
         self.damping = float(damping)
         self.step_adaptation = StepAdaptation()

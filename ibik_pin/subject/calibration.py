@@ -77,6 +77,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from ibik_pin.checks import as_float_array, require_instance
 from ibik_pin.exceptions import InputError, UnknownNameError
 from ibik_pin.human import neutral_stature
 from ibik_pin.io.keypoints import read_keypoints
@@ -211,6 +212,7 @@ def calibrate_subject(
             with 3 keypoints, segments of an implausible size (wrong units), a calibrated body.
         SolverError: the least-squares solver failed.
     """
+    require_instance(body, BodyModel, "body", "a BodyModel (ibik_pin.human.load_human)")
     settings = settings or CalibrationSettings()
     if body.calibrated:
         # Its keypoints are placed on the segments they were fitted with: scaling its segments again
@@ -218,7 +220,7 @@ def calibrate_subject(
         raise InputError(f"body: {body.urdf_path or 'the model'} is already a calibrated subject; calibrate the "
                          "model it was made from (e.g. the default human) on the new static trial")
     names = list(names)
-    points = np.asarray(positions, dtype=float)
+    points = as_float_array(positions, "positions")
     if points.ndim == 2:
         points = points[np.newaxis]
     if points.ndim != 3 or points.shape[1:] != (len(names), 3) or points.shape[0] == 0:

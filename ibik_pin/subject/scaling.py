@@ -212,6 +212,8 @@ def scale_from_stature(body: BodyModel, stature_m: float) -> BodyModel:
     Raises:
         InputError: the stature is not a positive number, or the body has no Head or foot keypoint.
     """
+    if isinstance(stature_m, bool) or not isinstance(stature_m, (int, float, np.integer, np.floating)):
+        raise InputError(f"stature_m: expected a number of metres, found {stature_m!r}", parameter="stature_m")
     stature_m = float(stature_m)
     if not (np.isfinite(stature_m) and stature_m > 0.0):
         raise InputError(f"stature_m: expected a positive height [m], got {stature_m}")

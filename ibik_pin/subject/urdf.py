@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from ibik_pin.checks import require_instance
 from ibik_pin.exceptions import FileFormatError, InputError
 from ibik_pin.human import KEYPOINT_LINK_PREFIX, human_urdf_path, human_urdf_tree
 from ibik_pin.io.urdf import urdf_numbers, urdf_origin
@@ -49,6 +50,7 @@ def write_subject_urdf(body: BodyModel, path: str | Path) -> list[str]:
         FileFormatError: the source URDF cannot be read, or the output cannot be written.
         InputError: a joint of the source URDF is missing from the body's model.
     """
+    require_instance(body, BodyModel, "body", "a BodyModel (ibik_pin.human.load_human)")
     source = Path(body.urdf_path) if body.urdf_path is not None else human_urdf_path()
     tree = human_urdf_tree(source)
     robot = tree.getroot()
