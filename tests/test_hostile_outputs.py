@@ -421,3 +421,30 @@ def test_a_set_aside_output_of_a_publish_still_going_is_left_alone(tmp_path):
     assert outdir.remove_leftovers(out) == []
 
     assert aside.is_dir() and not out.exists()
+
+
+def test_a_killed_runs_staging_folder_is_cleared_by_the_next_run_and_the_earlier_output_kept(case, capfd):
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    _notes(case)
+    before = tree_digest(case.out)
+    environment = dict(os.environ, PYTHONPATH=str(hostile.REPOSITORY))
+    process = subprocess.Popen([sys.executable, "-m", "ibik_pin.cli", *case.arguments(iterations="300")],
+                               stderr=subprocess.DEVNULL, env=environment, cwd=case.inputs)
+    deadline = time.monotonic() + 60
+    while not any(path.name.startswith(".out.staging.") for path in case.root.iterdir()):
+        assert process.poll() is None and time.monotonic() < deadline, "the run never staged its outputs"
+        time.sleep(0.05)
+    process.send_signal(signal.SIGKILL)  # no handler runs: the staging folder stays behind
+    process.wait(timeout=60)
+    (left,) = [path for path in case.root.iterdir() if path.name.startswith(".out.staging.")]
+    assert tree_digest(case.out) == before
+
+    code, lines = run_cli(case.arguments(*BLIND), capfd)
+
+    assert code == 0 and len(lines) == 1 and "kept 1 file" in lines[0], lines
+    assert not left.exists() and sorted(p.name for p in case.root.iterdir()) == ["in", "out"]
+    assert (case.out / "analysis_notes.txt").read_text() == "knee angles look high in frame 12\n"
