@@ -1,0 +1,229 @@
+"""Several people in --videos: every view's people detected in worker processes (each decodes its
+own video: frames never cross a process boundary), the detections associated across views into
+people, and the person `ibik track` follows chosen (--person).
+
+The detection of one view is sequential (MediaPipe's trackers follow their people frame to frame),
+so the views are spread over up to as many processes as the machine gives this one cores.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import queue
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from ibik_pin.exceptions import IbikError, InputError
+from ibik_pin.io.video import read_frames
+from ibik_pin.vision.people import DetectionSettings, ViewPeople, detect_people
+from ibik_pin.vision.person_association import PeopleTracks, associate_people
+
+__all__ = ["PERSON_RULE", "DetectedPeople", "PeopleReport", "chosen_person", "detect_people_in_videos",
+           "parse_person"]
+
+PERSON_RULE = ("the person seen in the most view-frames (detections two views or more agree on, summed over "
+               "views and frames), ties to the one nearest the point the cameras aim at")
+
+
+@dataclass
+class PeopleReport:
+    """Who was in the videos, and whom `ibik track` followed (report.json's "people").
+
+    Attributes:
+        found: the number of people the views agree on (two views or more).
+        tracked: the person followed, 1-based in the ranking of `view_frames`.
+        rule: how the default person is chosen.
+        view_frames: per person (ranked), detections associated to that person.
+        frames_triangulated: per person, frames where two views or more agree on that person.
+        unassociated_per_view: per camera, detections no other view confirms (left out).
+        pair_error_median_m: median reprojection error of the associated pairs of detections [m].
+        max_people: trackers per view (DetectionSettings.max_people).
+        detect_height: the height the frames were fed to the detector at [px] (0: full size).
+        workers: processes the views were detected in.
+    """
+
+    found: int
+    tracked: int
+    rule: str = PERSON_RULE
+    view_frames: list[int] = field(default_factory=list)
+    frames_triangulated: list[int] = field(default_factory=list)
+    unassociated_per_view: dict[str, int] = field(default_factory=dict)
+    pair_error_median_m: float | None = None
+    max_people: int = 0
+    detect_height: int = 0
+    workers: int = 1
+
+
+@dataclass
+class DetectedPeople:
+    """Every view's people and their association, with the time each step took.
+
+    Attributes:
+        names: the cameras, in the order of `views`.
+        views: per camera, the people its trackers followed.
+        tracks: the association across views and time.
+        seconds: "decode" and "detection" summed over the views (processor time in the workers),
+            "detection_wall" the wall time of the parallel detection, "association".
+        workers: the processes used.
+        settings: the detector's.
+    """
+
+    names: list[str]
+    views: list[ViewPeople]
+    tracks: PeopleTracks
+    seconds: dict[str, float]
+    workers: int
+    settings: DetectionSettings
+
+    def report(self, person: int) -> PeopleReport:
+        """The PeopleReport with `person` (0-based) followed."""
+        errors = self.tracks.pair_errors_m
+        return PeopleReport(found=self.tracks.count, tracked=person + 1, view_frames=list(self.tracks.view_frames),
+                            frames_triangulated=list(self.tracks.frames),
+                            unassociated_per_view=dict(zip(self.names, self.tracks.unassociated, strict=True)),
+                            pair_error_median_m=float(np.median(errors)) if errors else None,
+                            max_people=self.settings.max_people, detect_height=self.settings.detect_height,
+                            workers=self.workers)
+
+
+def parse_person(text: str | int) -> str | int:
+    """--person's value: "auto", "all" or a person's number (1 = the default rule's first)."""
+    if isinstance(text, int) and not isinstance(text, bool):
+        number = text
+    elif isinstance(text, str) and text in ("auto", "all"):
+        return text
+    elif isinstance(text, str) and text.strip().isdigit():
+        number = int(text)
+    else:
+        raise InputError(f"--person: expected auto, all or a person's number (1, 2, ...), found {text!r}")
+    if number < 1:
+        raise InputError(f"--person: expected auto, all or a person's number (1, 2, ...), found {text!r}")
+    return number
+
+
+def chosen_person(person: str | int, tracks: PeopleTracks) -> int:
+    """The 0-based person --person names ("auto": the rule's first)."""
+    if tracks.count == 0:
+        raise InputError("--videos: no person is seen by two cameras that agree on where they are: the views "
+                         "cannot be reconciled (a wrong calibration, unsynchronised videos, or nobody in view)")
+    if person == "auto":
+        return 0
+    if not isinstance(person, int) or not 1 <= person <= tracks.count:
+        raise InputError(f"--person: expected auto, all or 1 to {tracks.count} (the people the views agree on), "
+                         f"found {person!r}")
+    return person - 1
+
+
+def usable_cores() -> int:
+    """The cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not on Linux
+        return os.cpu_count() or 1
+
+
+def _timed(frames: Iterator[np.ndarray], spent: list[float]) -> Iterator[np.ndarray]:
+    """The frames, the time spent decoding them added to spent[0]."""
+    while True:
+        start = time.perf_counter()
+        try:
+            frame = next(frames)
+        except StopIteration:
+            spent[0] += time.perf_counter() - start
+            return
+        spent[0] += time.perf_counter() - start
+        yield frame
+
+
+def _detect_one(path: Path, settings: DetectionSettings, tick) -> tuple[ViewPeople, float, float]:
+    """One view's people, its decode seconds and its detection seconds."""
+    decode = [0.0]
+    start = time.perf_counter()
+    people = detect_people(_timed(read_frames(path), decode), settings, progress=tick)
+    return people, decode[0], time.perf_counter() - start - decode[0]
+
+
+def _worker(jobs: list[tuple[int, Path]], settings: DetectionSettings, messages) -> None:
+    """A worker process: detect each (view, video) in `jobs`, report frames and results on `messages`."""
+    try:
+        for view, path in jobs:
+            people, decode, detection = _detect_one(path, settings, lambda count: messages.put(("frames", count)))
+            messages.put(("done", view, people, decode, detection))
+    except IbikError as error:
+        messages.put(("error", str(error)))
+    except Exception as error:  # the parent re-raises it as the package's error
+        messages.put(("error", f"{type(error).__name__}: {error}"))
+
+
+def detect_people_in_videos(videos: dict[str, Path], cameras: Sequence, frame_rate: float, *, progress: bool,
+                            total_frames: int | None = None, settings: DetectionSettings | None = None,
+                            workers: int | None = None) -> DetectedPeople:
+    """Detect every camera's people (worker processes: `workers`, default the usable cores, at
+    most one per camera) and associate them across views and time.
+
+    Args:
+        videos: camera name -> its video.
+        cameras: the calibrated cameras (their order is the result's).
+        frame_rate: the videos' frame rate [Hz].
+        progress: draw a progress bar of the frames detected (when stderr is a terminal).
+        total_frames: the frames to expect over all videos (the bar's total), if known.
+    """
+    settings = settings if settings is not None else DetectionSettings()
+    names = [camera.name for camera in cameras]
+    workers = max(1, min(workers or usable_cores(), len(names)))
+    views: list[ViewPeople | None] = [None] * len(names)
+    decode = detection = 0.0
+    start = time.perf_counter()
+    with tqdm(total=total_frames, desc="people and silhouettes", unit="frame",
+              disable=None if progress else True) as bar:
+        if workers == 1:
+            for index, name in enumerate(names):
+                people, seconds_decode, seconds_detect = _detect_one(videos[name], settings, bar.update)
+                views[index], decode, detection = people, decode + seconds_decode, detection + seconds_detect
+        else:
+            # spawn, not fork: a forked MediaPipe (already run in this process) dies in the child.
+            context = multiprocessing.get_context("spawn")
+            messages = context.Queue()
+            shares = [[(index, videos[name]) for index, name in enumerate(names) if index % workers == worker]
+                      for worker in range(workers)]
+            processes = [context.Process(target=_worker, args=(share, settings, messages), daemon=True,
+                                         name=f"ibik-people-{worker}") for worker, share in enumerate(shares)]
+            for process in processes:
+                process.start()
+            try:
+                while any(view is None for view in views):
+                    try:
+                        message = messages.get(timeout=1.0)
+                    except queue.Empty:
+                        if not any(process.is_alive() for process in processes):
+                            raise IbikError("--videos: a detection process ended without its result") from None
+                        continue
+                    if message[0] == "frames":
+                        bar.update(message[1])
+                    elif message[0] == "done":
+                        _, index, people, seconds_decode, seconds_detect = message
+                        views[index], decode, detection = people, decode + seconds_decode, detection + seconds_detect
+                    else:
+                        raise InputError(message[1])
+            finally:
+                for process in processes:
+                    process.join(timeout=5.0)
+                    if process.is_alive():
+                        process.terminate()
+    wall = time.perf_counter() - start
+    counts = {name: view.frames for name, view in zip(names, views, strict=True) if view is not None}
+    if len(set(counts.values())) > 1:
+        raise InputError(f"--videos: the cameras' videos have different frame counts {counts}; "
+                         "they must be synchronised and of equal length")
+    detected = [view for view in views if view is not None]
+    start = time.perf_counter()
+    tracks = associate_people(cameras, detected, frame_rate)
+    seconds = {"decode": decode, "detection": detection, "detection_wall": wall,
+               "association": time.perf_counter() - start}
+    return DetectedPeople(names, detected, tracks, seconds, workers, settings)
