@@ -228,6 +228,19 @@ def frame_jumps(targets_m: np.ndarray, times_s: np.ndarray) -> FrameJumps:
             departure[frames_of_run] = gone_of_run
         if not blocked:
             break
+    # A frame dropped beside a leap that was dropped after it (the last frame leapt: the one before
+    # departs by half from it, and is an interior frame, judged first) is kept again when it fits
+    # the frames kept around it.
+    for frame in np.flatnonzero(dropped):
+        others = np.flatnonzero(~dropped & measurable)
+        kept = np.sort(np.append(others, frame))
+        if len(kept) < 3:
+            continue
+        frames, gone, agree, *_ = departures(kept, 1)
+        row = int(np.flatnonzero(frames[:, 0] == frame)[0])
+        with np.errstate(invalid="ignore"):
+            if agree[row] and gone[row, 0] <= JUMP_DISTANCE_M:
+                dropped[frame] = False
     # The frames kept, against their kept neighbours.
     kept = np.flatnonzero(~dropped & measurable)
     steps = np.zeros(frame_count, dtype=bool)
