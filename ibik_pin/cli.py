@@ -69,6 +69,10 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
                              "the other views' triangulated keypoints (with --videos, MediaPipe and three cameras "
                              "or more; report.json's extrinsics shows each camera's disagreement; the cameras are "
                              "written to calibration_refitted.toml)")
+    parser.add_argument("--person", default="auto",
+                        help="with --videos: whom to track among the people the views agree on: auto (default: "
+                             "the person seen in the most view-frames), a number (1 = that rule's first, 2 the "
+                             "next, ...; report.json's people lists them), or all (each into OUT/person_N)")
     parser.add_argument("--cameras", help="comma-separated subset of the calibration's cameras")
     parser.add_argument("--model", help="URDF of the human (default: example-robot-data's)")
     parser.add_argument("--trial-lengths", choices=("off", "reach"), default="off",
@@ -150,6 +154,7 @@ def _job(arguments: argparse.Namespace) -> TrackJob:
         model=arguments.model,
         c3d_mapping=arguments.c3d_mapping,
         trial_lengths=arguments.trial_lengths,
+        person=arguments.person,
         settings=TrackingSettings(method=arguments.method, qp_solver=arguments.qp_solver or DEFAULT_QP_SOLVER,
                                   iterations=arguments.iterations,
                                   step_tolerance=arguments.step_tolerance, image_stop=arguments.image_stop,

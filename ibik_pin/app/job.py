@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ibik_pin.app.axes import TRC_AXES
+from ibik_pin.app.video_people import parse_person
 from ibik_pin.exceptions import InputError, UnknownNameError
 from ibik_pin.solvers import available_qp_solvers
 from ibik_pin.tracking.settings import TrackingSettings
@@ -50,6 +51,8 @@ class TrackJob:
     `trc_axes` is the TRC files' axis convention: "auto" (detected against the calibration's
     cameras; y-up without a calibration; a C3D file's own declaration, POINT:Y_SCREEN, where it has
     one), "y-up" (Pose2Sim, OpenSim) or "z-up" (the calibration's own world); see app.axes.
+    `person` is whom to follow in the videos: "auto" (app.video_people.PERSON_RULE), a person's
+    number in that rule's ranking (1 the first), or "all" (each into OUT/person_N).
     `trial_lengths` "reach" lengthens a limb whose calibrated segments cannot reach its targets'
     distance on the trial (subject.trial_lengths.refine_from_reach); "off" keeps the calibration's.
     `targets` and `static` may be C3D files (recognised by content), their markers mapped to
@@ -74,6 +77,7 @@ class TrackJob:
     refit_cameras: list[str] | None = None
     c3d_mapping: Path | None = None
     trial_lengths: str = "off"
+    person: str | int = "auto"
 
     def __post_init__(self) -> None:
         """Paths given as str become Paths; what the CLI refuses, the API refuses too (InputError)."""
@@ -100,6 +104,9 @@ class TrackJob:
         for name in ("trc_axes", "segmenter", "trial_lengths"):
             if not isinstance(getattr(self, name), str):
                 raise InputError(f"TrackJob.{name}: expected a name (str), found {getattr(self, name)!r}")
+        object.__setattr__(self, "person", parse_person(self.person))
+        if self.person != "auto" and self.videos is None:
+            raise InputError("--person goes with --videos (the people are found in the videos)")
         if self.masks is not None and self.videos is not None:
             raise InputError("--masks and --videos: give one source of silhouettes, not both")
         if self.background is not None and self.videos is None:

@@ -20,6 +20,7 @@ import numpy as np
 from ibik_pin.app.axes import AXES_DESCRIPTIONS, AxesChoice
 from ibik_pin.app.input_reports import SilhouetteQuality, TriangulationReport
 from ibik_pin.app.report_units import FRAME_NUMBERING, UNITS
+from ibik_pin.app.video_people import PeopleReport
 from ibik_pin.io.files import json_ready, strict_json, write_text_atomically
 from ibik_pin.tracking.result import TrackingResult
 from ibik_pin.tracking.settings import TrackingSettings
@@ -225,6 +226,12 @@ class TrackingReport:
         diagnosis: what the run judged of its own evidence: suspect views and frames, the figures
             and thresholds (app.diagnosis.Diagnosis); None when not judged (the report of a run
             made outside `ibik track`).
+        people: with --videos and MediaPipe, who was in the videos and whom the run followed
+            (app.video_people.PeopleReport); None otherwise.
+        stage_seconds: wall time of each stage of the run [s] (see :data:`UNITS`).
+        detection_seconds: decoding and detection summed over the views' worker processes [s].
+        end_to_end_seconds: wall time of the whole run, reading to writing [s].
+        end_to_end_frames_per_second: frames per second of end_to_end_seconds, detection included.
         units: :data:`UNITS`, written into the file so that it describes itself.
     """
 
@@ -263,6 +270,11 @@ class TrackingReport:
     extrinsics: ExtrinsicsRefit | None = None
     trial_lengths: dict[str, Any] | None = None
     diagnosis: dict[str, Any] | None = None
+    people: PeopleReport | None = None
+    stage_seconds: dict[str, float] | None = None
+    detection_seconds: dict[str, float] | None = None
+    end_to_end_seconds: float | None = None
+    end_to_end_frames_per_second: float | None = None
     units: dict[str, str] = field(default_factory=lambda: dict(UNITS))
 
     @classmethod

@@ -63,6 +63,31 @@ UNITS = {
                    "the cameras turned by --refit-cameras are written to calibration_refitted.toml"),
     "extrinsics.reprojection_px": ("px: per camera, median distance from its detections to the landmarks the other "
                                    "views triangulate, projected, as calibrated; reprojection_after_px: re-fitted"),
+    "people": "null unless MediaPipe ran on --videos; otherwise the people.* entries",
+    "people.found": "the number of people two views or more agree on (app.video_people)",
+    "people.tracked": "the person followed, numbered as people.view_frames ranks them (1 = the most seen)",
+    "people.rule": "how the default person (--person auto) is chosen",
+    "people.view_frames": "per person, most seen first: detections associated to that person, over views and frames",
+    "people.frames_triangulated": "per person: frames where two views or more agree on that person",
+    "people.unassociated_per_view": "per camera: detections no other view confirms, left out of every person",
+    "people.pair_error_median_m": "m: median reprojection error, at the person's depth, of the associated detections",
+    "people.max_people": "trackers per view: the most people followed at once in a view",
+    "people.detect_height": "px: the height frames were fed to MediaPipe at (0: full size)",
+    "people.workers": "processes the views were detected in (at most one per camera, at most the usable cores)",
+    "stage_seconds": ("s: wall time of each stage: detection (decoding and MediaPipe, the views in parallel "
+                      "processes), association (people across views and time), triangulation (with the cameras' "
+                      "check), calibration (the subject's lengths), solve (the frame loop); absent stages left out"),
+    "stage_seconds.detection": "s: see stage_seconds",
+    "stage_seconds.association": "s: see stage_seconds",
+    "stage_seconds.triangulation": "s: see stage_seconds",
+    "stage_seconds.calibration": "s: see stage_seconds",
+    "stage_seconds.solve": "s: see stage_seconds",
+    "detection_seconds": "null without MediaPipe on --videos; otherwise detection_seconds.*",
+    "detection_seconds.decode": "s: decoding the videos, summed over the views (processor time in the workers)",
+    "detection_seconds.detection": "s: MediaPipe, summed over the views (processor time in the workers)",
+    "end_to_end_seconds": "s: wall time of the whole run, from reading the inputs to the written outputs",
+    "end_to_end_frames_per_second": ("frames per second of end_to_end_seconds: detection, triangulation, "
+                                     "calibration and solve included (frames_per_second is the frame loop's)"),
     "extrinsics.turn_deg": "deg: how far each re-fitted camera turned about its centre",
     "extrinsics.refitted": "the cameras turned by --refit-cameras",
     "extrinsics.reprojection_after_px": "px: extrinsics.reprojection_px with the re-fitted cameras",
@@ -93,6 +118,7 @@ UNITS = {
     "diagnosis": ("what the run judged of its own evidence (app.diagnosis; docs/method.md, Self-diagnosis): the "
                   "diagnosis.* entries"),
     "diagnosis.findings": ("every suspect view or frame: cause (view_targets_outside, view_empty, "
+                           "view_mostly_foreground, "
                            "view_skeleton_outside, frame_jump, frame_step, frame_residual), subject (camera name or "
                            "TRC frame number), figure and threshold (in the unit of the cause's threshold in "
                            "diagnosis.thresholds; 0-1 shares for views), consequence (what the run did)"),
@@ -100,12 +126,15 @@ UNITS = {
                                          "inside its silhouette, median over the sampled frames (null: every "
                                          "sampled silhouette empty)"),
     "diagnosis.sampled_frames": "the TRC frame numbers targets_inside_sampled was measured on",
+    "diagnosis.foreground_sampled": ("0-1: per camera, before the solve, the share of the image its silhouette "
+                                     "covers, median over the sampled frames"),
     "diagnosis.skeleton_inside_median": ("0-1: per camera, after the solve, the median over the frames of "
                                          "inside_fraction_per_view"),
     "diagnosis.departure_per_frame_m": ("m: per frame, the median over its targets of the distance to where the "
                                         "frames on either side put them (interpolated in time; extrapolated at "
                                         "the ends); null where not measured"),
-    "diagnosis.thresholds": ("view_floor and view_ratio (0-1 shares), jump_distance_m [m], frame_residual_floor_m "
+    "diagnosis.thresholds": ("view_floor, view_ratio and max_foreground (0-1 shares), jump_distance_m [m], "
+                             "frame_residual_floor_m "
                              "[m] and frame_residual_ratio (times the trial's median residual)"),
     "method": "the solver scheme: qp, stack, liegeois or ik",
     "qp_solver": "the backend that solved the qp scheme's level QPs (null for the other schemes)",

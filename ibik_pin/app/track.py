@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import shutil
 import sys
+import time
 import warnings
 from collections.abc import Sequence
 from dataclasses import replace
@@ -34,8 +35,9 @@ from ibik_pin.app.options import as_options
 from ibik_pin.app.outdir import check_outdir, kept_message, make_staging, overlay_file_names, publish
 from ibik_pin.app.outputs import write_outputs
 from ibik_pin.app.report import TrackingReport
-from ibik_pin.app.silhouette_files import load_silhouettes
-from ibik_pin.app.video_inputs import SilhouetteQualityReader, read_videos, restrict_to_subject
+from ibik_pin.app.silhouette_files import camera_folder_entries, load_silhouettes
+from ibik_pin.app.video_inputs import SilhouetteQualityReader, detect_videos_people, read_videos, restrict_to_subject
+from ibik_pin.app.video_people import DetectedPeople
 from ibik_pin.exceptions import FileFormatError, IbikWarning, InputError
 from ibik_pin.human import FOOT_KEYPOINTS, load_human
 from ibik_pin.io.c3d import c3d_axes, is_c3d
@@ -126,18 +128,24 @@ def _stature(names: list[str], targets_m: np.ndarray) -> float:
     return float(np.nanmedian(head - lowest))
 
 
-def run_track(job: TrackJob) -> TrackingReport:
+def run_track(job: TrackJob, detected: DetectedPeople | None = None) -> TrackingReport:
     """Run the whole job; returns the report that was written to OUTDIR/report.json.
+
+    With --person all, each person the views agree on is tracked into OUT/person_N (the detection
+    made once) and the first one's report is returned. `detected`: the videos' people, if already
+    detected (app.video_people).
 
     OUTDIR is checked first (app.outdir), and the outputs go to a staging folder made before
     any work, so that an OUTDIR that cannot be written is found at once. An earlier output's files
     that ibik did not write (not in its manifest) are kept, and a warning says so."""
     if not isinstance(job, TrackJob):
         raise InputError(f"run_track: expected a TrackJob (ibik_pin.app.job), found {type(job).__name__}")
+    if job.person == "all":
+        return _track_everyone(job)
     out = check_outdir(job.out, job.inputs)
     staging = make_staging(out)
     try:
-        report = _run_into(staging, job)
+        report = _run_into(staging, job, detected)
         kept = publish(staging, out)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
@@ -147,14 +155,47 @@ def run_track(job: TrackJob) -> TrackingReport:
     return report
 
 
-def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
+def _track_everyone(job: TrackJob) -> TrackingReport:
+    """--person all: each person the views reconcile, tracked into OUT/person_N."""
+    cameras = _job_cameras(job)
+    if job.videos is None or not cameras:
+        raise InputError("--person all: needs --videos and --calibration")
+    entries = camera_folder_entries(job.videos, [camera.name for camera in cameras], "videos")
+    detected = detect_videos_people(entries, cameras, not job.quiet)
+    reports: list[TrackingReport] = []
+    skipped = []
+    for number in range(1, detected.tracks.count + 1):
+        try:
+            reports.append(run_track(replace(job, person=number, out=job.out / f"person_{number}"), detected))
+        except InputError as error:
+            if "cannot be reconciled" not in str(error):
+                raise
+            skipped.append(number)
+    if not reports:
+        raise InputError("--person all: the views cannot be reconciled on anyone (a wrong calibration, "
+                         "unsynchronised videos, or nobody seen by two cameras)")
+    if skipped:
+        warnings.warn(f"--person all: person(s) {', '.join(map(str, skipped))} seen in too few frames or views "
+                      f"to track; {len(reports)} tracked into {job.out}/person_N", IbikWarning, stacklevel=2)
+    return reports[0]
+
+
+def _job_cameras(job: TrackJob) -> list:
+    """The calibration's cameras seeing the TRC's frame (--cameras applied), or none."""
+    if job.calibration is None:
+        return []
+    cameras = cameras_in_frame(read_calibration(job.calibration), POSE2SIM_TRC_TO_WORLD)
+    if job.cameras:
+        with as_options({"names": "--cameras"}):
+            cameras = select_cameras(cameras, job.cameras)
+    return cameras
+
+
+def _run_into(staging: Path, job: TrackJob, detected: DetectedPeople | None = None) -> TrackingReport:
     """Read, check, track and write every output into `staging`."""
-    cameras: list = []
+    started = time.perf_counter()
+    cameras = _job_cameras(job)
     if job.calibration is not None:
-        cameras = cameras_in_frame(read_calibration(job.calibration), POSE2SIM_TRC_TO_WORLD)
-        if job.cameras:
-            with as_options({"names": "--cameras"}):
-                cameras = select_cameras(cameras, job.cameras)
         check_camera_focal_lengths(cameras)
         if job.overlay:  # said now, not after the solve: a camera's name names its overlay video
             renamed = {name: file for name, file in overlay_file_names([c.name for c in cameras]).items()
@@ -166,7 +207,7 @@ def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
                                                                 if len(renamed) > 1 else ""),
                               IbikWarning, stacklevel=2)
     # Without --targets the videos' keypoints are triangulated into staging and read back as targets.
-    videos = read_videos(staging, job, cameras)
+    videos = read_videos(staging, job, cameras, detected)
     cameras = videos.cameras
     targets = videos.targets if videos.targets is not None else job.targets
     if targets is None:  # TrackJob refuses this unless the videos give the targets
@@ -218,11 +259,14 @@ def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
                                 axes_hint(axes))
     add_jumps(diagnosis, jumps, trc.frame_numbers)
     # Every keypoint scales the segments, tracked or not.
+    stages = dict(videos.stage_seconds)
+    calibration_started = time.perf_counter()
     body = prepare_body(job, names, targets_m, calibrate_on_targets=videos.triangulation is not None)
     trial_lengths = None
     if job.trial_lengths == "reach":  # a static take's joint centres are not rigid across takes
         trial_lengths = refine_from_reach(keypoint_lengths(body), names, targets_m)
         body = apply_lengths(body, trial_lengths)
+    stages["calibration"] = time.perf_counter() - calibration_started
     reader = None  # the silhouettes, each frame's read once for the tracker and the report
     if silhouettes is not None:
         reader = SilhouetteQualityReader(silhouettes.frame, cameras, targets_m)
@@ -232,9 +276,11 @@ def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
     tracker = Tracker(body, cameras if use_image else [], settings)
     solved = np.flatnonzero(~jumps.dropped)  # the frames of whole-body jumps are not solved
     source = reader if reader is None or len(solved) == frame_count else SolvedFramesSource(reader, solved)
+    solve_started = time.perf_counter()
     with tqdm(total=len(solved), desc="tracking", unit="frame", disable=True if job.quiet else None) as bar:
         result = tracker.track([names[index] for index in tracked], targets_m[solved][:, tracked],
                                source if use_image else None, progress=bar.update)
+    stages["solve"] = time.perf_counter() - solve_started
     if len(solved) < frame_count:
         result = expand_to_frames(result, body, solved, np.asarray(trc.times, dtype=float))
     diagnose_result(diagnosis, trc.frame_numbers, result.target_residuals, result.camera_names,
@@ -247,5 +293,9 @@ def _run_into(staging: Path, job: TrackJob) -> TrackingReport:
                            triangulation_report=videos.triangulation, extrinsics=videos.extrinsics,
                            trial_lengths=trial_lengths)
     report.diagnosis = diagnosis.to_report()
-    report.write(staging / "report.json")  # again, with the diagnosis
+    report.people, report.stage_seconds = videos.people, stages
+    report.detection_seconds = videos.detection_seconds or None
+    report.end_to_end_seconds = time.perf_counter() - started
+    report.end_to_end_frames_per_second = frame_count / report.end_to_end_seconds
+    report.write(staging / "report.json")  # again, with the diagnosis and the timings
     return report

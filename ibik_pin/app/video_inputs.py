@@ -10,9 +10,10 @@ other views deny never pulls the skeleton.
 
 from __future__ import annotations
 
+import time
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import cast
 
@@ -24,6 +25,7 @@ from ibik_pin.app.input_reports import SilhouetteQuality, TriangulationReport
 from ibik_pin.app.job import SEGMENTERS, TrackJob
 from ibik_pin.app.options import as_options
 from ibik_pin.app.silhouette_files import camera_folder_entries, check_video_size
+from ibik_pin.app.video_people import DetectedPeople, PeopleReport, chosen_person, detect_people_in_videos
 from ibik_pin.exceptions import IbikWarning, InputError
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, write_calibration
 from ibik_pin.io.trc import TrcData, write_trc
@@ -32,10 +34,11 @@ from ibik_pin.tracking.stack import Stack
 from ibik_pin.vision.extrinsics_refit import ExtrinsicsRefit, in_calibration_world, refit_extrinsics
 from ibik_pin.vision.learned_pose import MEDIAPIPE_INSTALL, VideoPose, detect_pose_in_frames, learned_pose_available
 from ibik_pin.vision.mask_store import CroppedMasks
+from ibik_pin.vision.person_views import person_pose
 from ibik_pin.vision.triangulation import labelled_landmarks, triangulate_landmarks
 
 __all__ = ["LIMB_KEYPOINTS", "REFITTED_CALIBRATION", "TRIANGULATED_TRC", "SilhouetteQualityReader", "VideoSources",
-           "detect_videos", "keep_subject",
+           "detect_videos", "detect_videos_people", "keep_subject",
            "points_inside", "read_videos", "refitted_cameras", "resolve_segmenter", "restrict_to_subject",
            "triangulated_trc"]
 
@@ -67,6 +70,11 @@ class VideoSources:
             the job gives the targets.
         stack: the stack to track the triangulated targets with (--triangulated-limbs), or None:
             the job's own.
+        people: who was in the videos and whom the detections follow (MediaPipe only).
+        stage_seconds: wall time of the steps run here [s]: "detection" (decoding and detecting,
+            in parallel processes), "association", "triangulation" (with the cameras' check).
+        detection_seconds: "decode" and "detection" summed over the views (processor seconds in
+            the worker processes).
     """
 
     cameras: list
@@ -77,13 +85,18 @@ class VideoSources:
     extrinsics: ExtrinsicsRefit | None = None
     targets: Path | None = None
     stack: Stack | None = None
+    people: PeopleReport | None = None
+    stage_seconds: dict[str, float] = field(default_factory=dict)
+    detection_seconds: dict[str, float] = field(default_factory=dict)
 
 
-def read_videos(staging: Path, job: TrackJob, cameras: Sequence) -> VideoSources:
-    """Run the videos' segmenter once; with MediaPipe's landmarks and three cameras or more, measure
-    each camera's disagreement with the others and turn those of --refit-cameras (written to
-    staging/REFITTED_CALIBRATION); without --targets, triangulate the targets into
-    staging/TRIANGULATED_TRC (VideoSources.targets)."""
+def read_videos(staging: Path, job: TrackJob, cameras: Sequence, detected: DetectedPeople | None = None
+                ) -> VideoSources:
+    """Run the videos' segmenter once; with MediaPipe, follow the person --person names among
+    those the views agree on (app.video_people; `detected`: its detections, if already made); with
+    MediaPipe's landmarks and three cameras or more, measure each camera's disagreement with the
+    others and turn those of --refit-cameras (written to staging/REFITTED_CALIBRATION); without
+    --targets, triangulate the targets into staging/TRIANGULATED_TRC (VideoSources.targets)."""
     cameras = list(cameras)
     if job.refit_cameras is not None and (job.videos is None or len(cameras) < 3 or job.segmenter == "mog2"
                                           or not learned_pose_available()):
@@ -109,7 +122,17 @@ def read_videos(staging: Path, job: TrackJob, cameras: Sequence) -> VideoSources
         raise InputError(f"without --targets the end effectors are triangulated: that needs two cameras or more, "
                          f"found {len(cameras)}")
     entries = camera_folder_entries(job.videos, [camera.name for camera in cameras], "videos")
-    poses = detect_videos(entries, cameras, not job.quiet)
+    if detected is None:
+        detected = detect_videos_people(entries, cameras, not job.quiet)
+    person = chosen_person(getattr(job, "person", "auto"), detected.tracks)
+    poses = person_pose(cameras, detected.views, detected.tracks, person)
+    for camera, pose in zip(cameras, poses, strict=True):
+        if pose.masks.size != tuple(camera.size):
+            pose.masks = pose.masks.fitted(tuple(camera.size))
+    timing = {"detection": detected.seconds["detection_wall"], "association": detected.seconds["association"]}
+    people_report = detected.report(person)
+    worker_seconds = {key: detected.seconds[key] for key in ("decode", "detection")}
+    start = time.perf_counter()
     extrinsics = None
     # One triangulation serves the extrinsics check and the targets, unless a camera is turned.
     triangulated = _triangulate(cameras, poses) if keypoints_needed or len(cameras) >= 3 else None
@@ -120,15 +143,19 @@ def read_videos(staging: Path, job: TrackJob, cameras: Sequence) -> VideoSources
             write_calibration(staging / REFITTED_CALIBRATION, in_calibration_world(cameras, POSE2SIM_TRC_TO_WORLD))
             triangulated = None
     if not keypoints_needed:
-        return VideoSources(cameras, poses, segmenter, extrinsics=extrinsics)
+        timing["triangulation"] = time.perf_counter() - start
+        return VideoSources(cameras, poses, segmenter, extrinsics=extrinsics, people=people_report,
+                            stage_seconds=timing, detection_seconds=worker_seconds)
     trc, figures = triangulated_trc(cameras, poses, video_frame_rate(entries[cameras[0].name]), triangulated)
+    timing["triangulation"] = time.perf_counter() - start
     write_trc(staging / TRIANGULATED_TRC, trc)
     left_out = () if job.triangulated_limbs else LIMB_KEYPOINTS
     report = TriangulationReport(file=TRIANGULATED_TRC, keypoints=list(trc.marker_names),
                                  tracked_keypoints=[name for name in trc.marker_names if name not in left_out],
                                  **figures)
     stack = Stack.packaged(LIMB_STACK_FILE) if job.triangulated_limbs else None
-    return VideoSources(cameras, poses, segmenter, report, left_out, extrinsics, staging / TRIANGULATED_TRC, stack)
+    return VideoSources(cameras, poses, segmenter, report, left_out, extrinsics, staging / TRIANGULATED_TRC, stack,
+                        people_report, timing, worker_seconds)
 
 
 def _triangulate(cameras: Sequence, poses: Sequence[VideoPose]) -> tuple[dict, dict]:
@@ -184,6 +211,21 @@ def resolve_segmenter(requested: str, keypoints_needed: bool) -> str:
                       f"for learned silhouettes: {MEDIAPIPE_INSTALL}", IbikWarning, stacklevel=2)
         return "mog2"
     return "mediapipe" if requested == "auto" else requested
+
+
+def detect_videos_people(videos: dict[str, Path], cameras: Sequence, progress: bool) -> DetectedPeople:
+    """Every camera's people, in parallel, associated across views (app.video_people)."""
+    sizes = {camera.name: check_video_size(videos[camera.name], camera) for camera in cameras}
+    frames = 0
+    for camera in cameras:
+        with VideoReader(videos[camera.name]) as reader:
+            frames += max(reader.frame_count, 0)
+    with VideoReader(videos[cameras[0].name]) as reader:
+        fps = reader.fps
+    # Without a frame rate the association's speed bound assumes 30 Hz: looser at a higher rate.
+    rate = float(fps) if np.isfinite(fps) and fps > 0 else 30.0
+    del sizes  # checked (a warning for an encoder's alignment): the masks are fitted to each camera
+    return detect_people_in_videos(videos, cameras, rate, progress=progress, total_frames=frames or None)
 
 
 def detect_videos(videos: dict[str, Path], cameras: Sequence, progress: bool) -> list[VideoPose]:

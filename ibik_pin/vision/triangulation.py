@@ -11,7 +11,8 @@ Three steps, each a physical argument rather than a tuned constant:
 2. **Robust triangulation.** Weighted linear triangulation (DLT) on undistorted rays; a view whose
    reprojection lies farther than `outlier_m` from the point, measured at the point's depth (a
    metric distance: a hand's width, whatever the camera's resolution), is dropped and the point
-   triangulated again, as long as two views remain.
+   triangulated again, as long as two views remain; a point whose last two views still miss it
+   by more is left out (NaN): one of them is wrong, and nothing says which.
 3. **Pose2Sim's names.** BlazePose's landmarks map to the keypoints Pose2Sim writes (HALPE_26
    names); its Neck is the shoulders' midpoint and its Head (the top of the head) is placed from
    the ears, the nose and the shoulders (:func:`head_top`).
@@ -226,6 +227,10 @@ def triangulate_landmarks(cameras: Sequence[PinholeCamera], landmarks: np.ndarra
         _, flags, labelled, weighted = min(candidates, key=lambda candidate: candidate[0])
         result = triangulate(cameras, labelled, weighted, outlier_m)
         frame_points = result.points
+        # Two views left that still miss each other: no point rather than a wrong one (a limb the
+        # detector guessed in one view, another person's in the other).
+        kept_errors = np.where(result.views_used, result.reprojection_m, 0.0)
+        frame_points[np.nan_to_num(kept_errors, nan=0.0).max(axis=0) > outlier_m] = np.nan
         flags_array = np.array(flags)
         if np.isfinite(frame_points).all(axis=1).sum() >= 7 and _face_says_swapped(frame_points):
             frame_points = _swap_sides(frame_points)
