@@ -1,4 +1,4 @@
-"""Speed against OpenSim on the same model and targets: `ibik track` with the image, and blind,
+"""Speed against OpenSim on the same model and targets: `ibik track` with the image and blind,
 alternated with OpenSim's InverseKinematicsTool (blind) on the model.osim `ibik track` wrote.
 
 Conditions: real motion capture as the real-mocap benchmark renders it (experiments/realdata:
@@ -8,11 +8,14 @@ rendered on the scaled model, 4 views). Every condition has --frames frames at 6
 its 120).
 
 In each of --rounds rounds, each condition runs in turn: `ibik track` with the image, OpenSim's IK,
-`ibik track` blind (PIK). Figures:
-- ibik: report.json's frame rate of the solves alone (solve_frames_per_second; the support
-  images are built in a second process, the readahead, as `ibik track` runs by default), of the
-  whole frame loop, and the whole run_track call's wall time (subject calibration, reading,
-  writing every output);
+`ibik track` blind (PIK), `ibik track` with the image on one thread (--read-ahead off). Figures:
+- ibik: report.json's frame rate of the solves alone (solve_frames_per_second), of the whole
+  frame loop, and the whole run_track call's wall time (subject calibration, reading, writing
+  every output). By default the support images are built in a second process (the readahead)
+  while the frame before is solved; on one thread they are built between the solves. On a
+  shared machine the two differ: the process and its child share the session's slice of the
+  cores (measured here at load 12 on 2 cores: the solves 2x faster with the child off), where on
+  a quiet machine the child takes the idle core;
 - OpenSim: frames over InverseKinematicsTool.run()'s time (reading the TRC, the solves, writing
   the .mot; one thread), and over the whole of loading model.osim, setting up the tool and
   running it. Its tasks: every target keypoint, weight 1 (the targets file has no virtual marker);
@@ -59,21 +62,22 @@ DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 @dataclasses.dataclass
 class Condition:
-    """One motion and view count: `track(use_image, out)` runs `ibik track` and returns its report's
-    frame rates and its wall time; `targets` is the targets file both tools follow."""
+    """One motion and view count: `track(use_image, out, read_ahead)` runs `ibik track` and returns
+    its report's frame rates and its wall time; `targets` is the targets file both tools follow."""
 
     name: str
     views: int
     targets: Path
     frames: int
-    track: Callable[[bool, Path], dict]
+    track: Callable[[bool, Path, str], dict]
 
 
 def realdata_condition(clip: str, views: int, frames: int, cache: Path) -> Condition:
     inputs = prepare_inputs(CLIPS[clip], DATA, frames, cache)
 
-    def track(use_image: bool, out: Path) -> dict:
-        run = run_variant(inputs, variant(f"ibik{views}v" if use_image else "pik"), "clean", out=out)
+    def track(use_image: bool, out: Path, read_ahead: str = "process") -> dict:
+        run = run_variant(inputs, variant(f"ibik{views}v" if use_image else "pik"), "clean",
+                          {"read_ahead": read_ahead}, out=out)
         return {"solve_fps": run.solve_fps, "loop_fps": run.loop_fps, "wall_s": run.wall_seconds,
                 "judged_error_mm": run.judged_mm}
 
@@ -83,12 +87,12 @@ def realdata_condition(clip: str, views: int, frames: int, cache: Path) -> Condi
 def demo_condition(folder: Path) -> Condition:
     paths = prepare_demo_inputs(folder)
 
-    def track(use_image: bool, out: Path) -> dict:
+    def track(use_image: bool, out: Path, read_ahead: str = "process") -> dict:
         single_threaded_math()
         started = time.perf_counter()
         report = run_track(TrackJob(targets=paths.targets, static=paths.folder / "static.trc",
                                     calibration=paths.calibration, masks=paths.masks, out=out, quiet=True,
-                                    settings=TrackingSettings(use_image=use_image)))
+                                    settings=TrackingSettings(use_image=use_image, read_ahead=read_ahead)))
         return {"solve_fps": float(report["solve_frames_per_second"]), "loop_fps": float(report["frames_per_second"]),
                 "wall_s": time.perf_counter() - started}
 
@@ -101,6 +105,7 @@ def opensim_ik(model_path: Path, targets: Path, work: Path) -> dict:
     import opensim
 
     opensim.Logger.setLevelString("warn")
+    opensim.Logger.removeFileSink()  # else opensim.log in the working directory
     started = time.perf_counter()
     model = opensim.Model(str(model_path))
     markers = opensim.TimeSeriesTableVec3(str(targets))
@@ -158,12 +163,14 @@ def median_ratio(pairs: list[float]) -> float:
 
 def measure(conditions: list[Condition], rounds: int, out: Path) -> dict:
     """The alternated runs: per round, per condition, ibik with the image, OpenSim, ibik blind."""
-    runs: dict = {c.name + f"_{c.views}v": {"image": [], "blind": [], "opensim": []} for c in conditions}
+    runs: dict = {c.name + f"_{c.views}v": {"image": [], "image_one_thread": [], "blind": [], "opensim": []}
+                  for c in conditions}
     models: dict[str, Path] = {}
     for condition in conditions:  # a first run of each, not timed: compiled code loaded, model.osim written
         key = f"{condition.name}_{condition.views}v"
         folder = out / "runs" / key
         condition.track(True, folder / "image")
+        condition.track(True, folder / "image_one_thread", "off")
         models[key] = folder / "image" / "model.osim"
         (folder / "opensim").mkdir(parents=True, exist_ok=True)
         opensim_ik(models[key], condition.targets, folder / "opensim")
@@ -174,20 +181,23 @@ def measure(conditions: list[Condition], rounds: int, out: Path) -> dict:
             runs[key]["image"].append(condition.track(True, folder / "image"))
             runs[key]["opensim"].append(opensim_ik(models[key], condition.targets, folder / "opensim"))
             runs[key]["blind"].append(condition.track(False, folder / "blind"))
+            runs[key]["image_one_thread"].append(condition.track(True, folder / "image_one_thread", "off"))
             image, opensim_run = runs[key]["image"][-1], runs[key]["opensim"][-1]
             print(f"round {round_index + 1}/{rounds} {key}: ibik image {image['solve_fps']:.1f} frames/s solving "
                   f"({image['wall_s']:.2f} s whole), OpenSim {condition.frames / opensim_run['run_s']:.1f} frames/s "
-                  f"({opensim_run['whole_s']:.2f} s whole), ibik blind {runs[key]['blind'][-1]['solve_fps']:.1f}",
+                  f"({opensim_run['whole_s']:.2f} s whole), ibik blind {runs[key]['blind'][-1]['solve_fps']:.1f}, "
+                  f"ibik image on one thread {runs[key]['image_one_thread'][-1]['solve_fps']:.1f}",
                   flush=True)
     results: dict = {}
     for condition in conditions:
         key = f"{condition.name}_{condition.views}v"
         frames = condition.frames
-        image, blind, opensim_runs = runs[key]["image"], runs[key]["blind"], runs[key]["opensim"]
+        opensim_runs = runs[key]["opensim"]
         opensim_fps = [frames / run["run_s"] for run in opensim_runs]
         row: dict = {"motion": condition.name, "views": condition.views, "frames": frames,
                      "targets": os.path.relpath(condition.targets, out)}
-        for label, values in (("image", image), ("blind", blind)):
+        for label in ("image", "image_one_thread", "blind"):
+            values = runs[key][label]
             row[f"ibik_{label}_solve_fps"] = float(np.median([v["solve_fps"] for v in values]))
             row[f"ibik_{label}_loop_fps"] = float(np.median([v["loop_fps"] for v in values]))
             row[f"ibik_{label}_wall_s"] = float(np.median([v["wall_s"] for v in values]))
@@ -215,13 +225,16 @@ def markdown(results: dict, rounds: int, header: str) -> str:
              f"Frames/s: medians of {rounds} rounds; each ratio the median of the rounds' ratios (the runs of a "
              "round are taken in turn).", "",
              "| motion, views | ibik image, solves [frames/s] | OpenSim IK [frames/s] | ratio | ibik image, frame "
-             "loop | ratio | ibik blind, solves | ratio | whole run: ibik image [s] | OpenSim [s] | ratio |",
-             "| --- |" + " ---: |" * 10]
+             "loop | ratio | ibik image on one thread, solves | ratio | its frame loop | ratio | ibik blind, solves "
+             "| ratio | whole run: ibik image [s] | OpenSim [s] | ratio |",
+             "| --- |" + " ---: |" * 14]
     for row in results.values():
         lines.append(
             f"| {row['motion']}, {row['views']} | {row['ibik_image_solve_fps']:.1f} | {row['opensim_fps']:.1f} | "
             f"{row['ibik_image_solve_over_opensim']:.2f} | {row['ibik_image_loop_fps']:.1f} | "
-            f"{row['ibik_image_loop_over_opensim']:.2f} | {row['ibik_blind_solve_fps']:.1f} | "
+            f"{row['ibik_image_loop_over_opensim']:.2f} | {row['ibik_image_one_thread_solve_fps']:.1f} | "
+            f"{row['ibik_image_one_thread_solve_over_opensim']:.2f} | {row['ibik_image_one_thread_loop_fps']:.1f} | "
+            f"{row['ibik_image_one_thread_loop_over_opensim']:.2f} | {row['ibik_blind_solve_fps']:.1f} | "
             f"{row['ibik_blind_solve_over_opensim']:.2f} | {row['ibik_image_wall_s']:.2f} | "
             f"{row['opensim_whole_s']:.2f} | {row['ibik_image_whole_over_opensim_whole']:.2f} |")
     return "\n".join(lines) + "\n"
