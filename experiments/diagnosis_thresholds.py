@@ -149,7 +149,7 @@ def _view_row(folder: Path, silhouettes: str, broken: str | None) -> dict:
 
     evidence = view_evidence(cameras, masks, targets)
     return {"condition": folder.name, "silhouettes": silhouettes, "broken": broken or "none",
-            "median_share": evidence.median_share()}
+            "median_share": evidence.median_share(), "median_foreground": evidence.median_foreground()}
 
 
 def view_figures(sweep_inputs: Path) -> dict:
@@ -170,6 +170,8 @@ def view_figures(sweep_inputs: Path) -> dict:
         counts[_verdict(row)] += 1
     return {"view_floor": VIEW_FLOOR, "view_ratio": VIEW_RATIO, "good_views": len(good),
             "good_min_share": float(np.min(good)), "good_min_ratio_to_best": float(np.min(ratios)),
+            "good_max_foreground": float(max(share for row in rows if row["broken"] == "none"
+                                             for share in row["median_foreground"].values())),
             "verdicts": verdicts, "rows": rows}
 
 

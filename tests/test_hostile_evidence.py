@@ -197,6 +197,7 @@ REFUSED4: list[tuple[str, Callable, str]] = [
 
 # id, setup, {cause: [subjects]} expected in report.json's diagnosis, the warning lines expected.
 VIEW_WARNING = r"^--masks: view\(s\) {camera} 0\.\d\d: share of the projected targets inside the silhouette"
+FOREGROUND_WARNING = r"^--masks: view\(s\) {cameras}: share of the image the silhouette covers .* over 0\.6"
 JUMP_WARNING = r"^--targets: {count} frame\(s\) whose targets all leap more than 0\.2 m away .* frame {frame} \("
 WARNED: list[tuple[str, Callable, dict[str, list[str]], list[str]]] = [
     ("rotation_vector_1e12", lambda c: _camera(c, ("cam1",), _turned_by_rotation_vector(1e12)),
@@ -212,6 +213,9 @@ WARNED: list[tuple[str, Callable, dict[str, list[str]], list[str]]] = [
     ("one_view_of_someone_standing_elsewhere",
      lambda c: _each_mask(c, ("cam1",), lambda m: np.roll(m, MASK_SHIFT_PX, axis=1)),
      {"view_targets_outside": ["cam1"]}, [VIEW_WARNING.format(camera="cam1")]),
+    ("one_view_inverted", lambda c: _each_mask(c, ("cam1",), lambda m: 255 - m),
+     {"view_targets_outside": ["cam1"], "view_mostly_foreground": ["cam1"]},
+     [VIEW_WARNING.format(camera="cam1"), FOREGROUND_WARNING.format(cameras="cam1 0\\.9\\d")]),
     ("one_view_empty_in_every_frame", lambda c: _each_mask(c, ("cam1",), np.zeros_like),
      {"view_empty": ["cam1"]}, [r"^--masks: view\(s\) cam1: every sampled silhouette \(16 frames\) is empty"]),
     ("one_frame_shifted_1e6_m", _frames_shifted([10], [1e6, 0.0, 0.0]),
@@ -247,6 +251,9 @@ WARNED4: list[tuple[str, Callable, dict[str, list[str]], list[str]]] = [
      {"view_targets_outside": ["cam3"]}, [VIEW_WARNING.format(camera="cam3")]),
     ("four_views_one_rotation_vector_1e12", lambda c: _camera(c, ("cam2",), _turned_by_rotation_vector(1e12)),
      {"view_targets_outside": ["cam2"]}, [VIEW_WARNING.format(camera="cam2")]),
+    ("four_views_one_inverted", lambda c: _each_mask(c, ("cam2",), lambda m: 255 - m),
+     {"view_targets_outside": ["cam2"], "view_mostly_foreground": ["cam2"]},
+     [VIEW_WARNING.format(camera="cam2"), FOREGROUND_WARNING.format(cameras="cam2 0\\.9\\d")]),
     ("four_views_one_empty", lambda c: _each_mask(c, ("cam4",), np.zeros_like),
      {"view_empty": ["cam4"]}, [r"^--masks: view\(s\) cam4: every sampled silhouette"]),
     ("four_views_one_of_another_moment", lambda c: _another_moment(c, ("cam1",)),
@@ -393,6 +400,22 @@ def test_noisy_targets_tracked_blind_raise_no_diagnosis_warning(case):
         data.positions = data.positions + np.random.default_rng(7).normal(0.0, 0.010, data.positions.shape)
     case.edit_trc(case.targets, noisy)
     _assert_quiet(*_run(case, ["--no-image"]), case.out)
+
+
+def _alpha_silhouette(mask: np.ndarray) -> np.ndarray:
+    image = np.zeros((*mask.shape[:2], 4), np.uint8)
+    image[..., 3] = mask
+    return image
+
+
+@pytest.mark.parametrize("encode", [_alpha_silhouette, lambda m: (m > 0).astype(np.uint16),
+                                    lambda m: (m > 0).astype(np.uint16) * 65535,
+                                    lambda m: (m > 0).astype(np.uint8) * 3],
+                         ids=["alpha_channel", "16_bit_labels_0_1", "16_bit_full_range", "labels_0_3"])
+def test_masks_in_the_usual_encodings_raise_no_diagnosis_warning(case, encode):
+    _each_mask(case, BOTH, encode)
+    report = _assert_quiet(*_run(case, None), case.out)
+    assert min(report["diagnosis"]["targets_inside_sampled"].values()) > 0.9
 
 
 POSE2SIM = SHARED_DATA / "pose2sim_demo"

@@ -33,9 +33,9 @@ from ibik_pin.app.axes import AxesChoice
 from ibik_pin.app.input_checks import JUMP_DISTANCE_M, FrameJumps
 from ibik_pin.exceptions import IbikWarning, InputError
 
-__all__ = ["EVIDENCE_FRAMES", "FRAME_RESIDUAL_FLOOR_M", "FRAME_RESIDUAL_RATIO", "VIEW_FLOOR", "VIEW_RATIO",
-           "Diagnosis", "Finding", "ViewEvidence", "add_jumps", "axes_hint", "check_views", "diagnose_result",
-           "view_evidence"]
+__all__ = ["EVIDENCE_FRAMES", "FRAME_RESIDUAL_FLOOR_M", "FRAME_RESIDUAL_RATIO", "MAX_FOREGROUND", "VIEW_FLOOR",
+           "VIEW_RATIO", "Diagnosis", "Finding", "ViewEvidence", "add_jumps", "axes_hint", "check_views",
+           "diagnose_result", "view_evidence"]
 
 # A view holds the subject when at least this share of the projected targets falls inside its
 # silhouette (median over the sampled frames), and at least VIEW_RATIO of the best view's share.
@@ -45,6 +45,11 @@ __all__ = ["EVIDENCE_FRAMES", "FRAME_RESIDUAL_FLOOR_M", "FRAME_RESIDUAL_RATIO", 
 # cam1 and cam2 swapped among 4 views, 0.50 and 0.54 of the best's (docs/method.md).
 VIEW_FLOOR = 0.2
 VIEW_RATIO = 0.6
+# A silhouette covering more of its image than this (median over the sampled frames) is the
+# background read as the subject (inverted, or a channel that is uniform). Good views: at most
+# 0.063 on the sweep's conditions, 0.02-0.07 on Pose2Sim's real video (0.09 its largest frame);
+# an inverted mask of the demo covers 0.95.
+MAX_FOREGROUND = 0.6
 # Frames whose masks are read for the views' evidence, spread over the trial.
 EVIDENCE_FRAMES = 16
 # A frame's mean end-effector residual above both of these is far above the trial's.
@@ -54,6 +59,7 @@ FRAME_RESIDUAL_RATIO = 5.0
 CAUSES = {
     "view_targets_outside": "a view's silhouettes hold too few of the projected targets",
     "view_empty": "a view's silhouettes are empty in every sampled frame",
+    "view_mostly_foreground": "a view's silhouettes cover most of the image (inverted, or the wrong channel?)",
     "view_skeleton_outside": "a view's silhouettes hold too little of the tracked skeleton",
     "frame_jump": "a frame's targets all leapt away from the frames on either side and back (dropped)",
     "frame_step": "the whole body moved faster than a body can into a frame and stayed there (kept)",
@@ -89,11 +95,18 @@ class ViewEvidence:
         frames: the sampled frame indices (0-based rows of the TRC).
         shares: (frames, cameras) share of the frame's present targets inside the silhouette [0-1],
             NaN where the silhouette is empty or no target is present.
+        foreground: (frames, cameras) share of the image the silhouette covers [0-1].
     """
 
     cameras: list[str]
     frames: list[int]
     shares: np.ndarray
+    foreground: np.ndarray
+
+    def median_foreground(self) -> dict[str, float]:
+        """Per camera, the median over the frames of the share of the image its silhouette covers."""
+        return {name: float(np.median(column)) if column.size else 0.0
+                for name, column in zip(self.cameras, self.foreground.T, strict=True)}
 
     def median_share(self) -> dict[str, float | None]:
         """Per camera, the median of its shares over the frames (None when never measured)."""
@@ -110,6 +123,8 @@ class Diagnosis:
         targets_inside_sampled: per camera, the median share of the projected targets inside its
             silhouette over the sampled frames [0-1] (before the solve); empty without silhouettes.
         sampled_frames: TRC frame numbers of those frames.
+        foreground_sampled: per camera, the median share of the image its silhouette covers over
+            the same frames [0-1].
         skeleton_inside_median: per camera, the median over the frames of the tracked skeleton's
             share inside the silhouette [0-1] (after the solve).
         departure_per_frame_m: per frame, how far its targets lie (median over them) from where the
@@ -120,10 +135,12 @@ class Diagnosis:
     findings: list[Finding] = field(default_factory=list)
     targets_inside_sampled: dict[str, float | None] = field(default_factory=dict)
     sampled_frames: list[int] = field(default_factory=list)
+    foreground_sampled: dict[str, float] = field(default_factory=dict)
     skeleton_inside_median: dict[str, float | None] = field(default_factory=dict)
     departure_per_frame_m: list[float | None] = field(default_factory=list)
     thresholds: dict[str, float] = field(default_factory=lambda: {
-        "view_floor": VIEW_FLOOR, "view_ratio": VIEW_RATIO, "jump_distance_m": JUMP_DISTANCE_M,
+        "view_floor": VIEW_FLOOR, "view_ratio": VIEW_RATIO, "max_foreground": MAX_FOREGROUND,
+        "jump_distance_m": JUMP_DISTANCE_M,
         "frame_residual_floor_m": FRAME_RESIDUAL_FLOOR_M, "frame_residual_ratio": FRAME_RESIDUAL_RATIO})
 
     def to_report(self) -> dict[str, Any]:
@@ -161,13 +178,15 @@ def view_evidence(cameras: Sequence, masks_of_frame: Callable[[int], Sequence[np
         if usable.size else np.zeros(0, dtype=int)
     frames = [int(usable[pick]) for pick in picks]
     shares = np.full((len(frames), len(cameras)), np.nan)
+    foreground = np.zeros((len(frames), len(cameras)))
     for row, frame in enumerate(frames):
         points = targets_m[frame]
         points = points[np.isfinite(points).all(axis=1)]
         for column, (camera, mask) in enumerate(zip(cameras, masks_of_frame(frame), strict=True)):
             if mask.any():
                 shares[row, column] = float(np.mean(_points_inside(camera, mask, points)))
-    return ViewEvidence([camera.name for camera in cameras], frames, shares)
+            foreground[row, column] = float(np.count_nonzero(mask)) / mask.size
+    return ViewEvidence([camera.name for camera in cameras], frames, shares, foreground)
 
 
 def _warn_once(text: str) -> None:
@@ -210,6 +229,15 @@ def check_views(evidence: ViewEvidence, option: str, frame_numbers: Sequence[int
                    f"over {len(evidence.frames)} frames), under {VIEW_FLOOR:g} or under {VIEW_RATIO:g} x the best "
                    f"view's {best:.2f}; are these cameras' silhouettes swapped, mirrored, of another moment, or "
                    "their calibration wrong?")
+    covering = {name: share for name, share in evidence.median_foreground().items() if share > MAX_FOREGROUND}
+    for name, share in covering.items():
+        diagnosis.findings.append(Finding("view_mostly_foreground", name, share, MAX_FOREGROUND, "kept"))
+    if covering:
+        listed = ", ".join(f"{name} {share:.2f}" for name, share in covering.items())
+        _warn_once(f"{option}: view(s) {listed}: share of the image the silhouette covers (median over "
+                   f"{len(evidence.frames)} frames), over {MAX_FOREGROUND:g}; is the background read as the subject "
+                   "(inverted masks, or the wrong channel)?")
+    diagnosis.foreground_sampled = evidence.median_foreground()
     for name in empty:
         diagnosis.findings.append(Finding("view_empty", name, None, None,
                                           "left out of the image term in every frame whose silhouette is empty"))
