@@ -10,13 +10,16 @@ Pose2Sim demo's subject, pasted as a second person walking a circle around him. 
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
 
 from ibik_pin.app.video_people import chosen_person, detect_people_in_videos, parse_person
+from ibik_pin.cli import main
 from ibik_pin.exceptions import InputError
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, read_calibration
+from ibik_pin.io.openpose import read_openpose_frames
 from ibik_pin.io.trc import read_trc
 from ibik_pin.vision.camera import cameras_in_frame
 from ibik_pin.vision.learned_pose import LANDMARKS, MEDIAPIPE_INSTALL, learned_pose_available
@@ -179,3 +182,45 @@ def test_the_whole_two_person_demo_follows_the_subject(demo_clip):
     for segment in ("thigh", "shank"):
         left, right = np.nanmedian(lengths["L" + segment]), np.nanmedian(lengths["R" + segment])
         assert abs(left - right) / max(left, right) <= 0.12, (segment, left, right)
+
+
+def test_the_qualisys_calibration_triangulates_the_joints_of_its_toml_conversion():
+    """`--calibration Calib.qca.txt` and Pose2Sim's TOML conversion of it: the same detections
+    (here Pose2Sim's own keypoints of the demo projected with the TOML's cameras) triangulate to
+    the same joints within 1 mm through the triangulation `ibik track --videos` uses."""
+    folder = TEST_DATA / "pose2sim_calibration"
+    toml_cameras = _cameras(folder / "Calib_qualisys_converted.toml")
+    qualisys_cameras = _cameras(folder / "Calib.qca.txt")
+    reference = read_trc(EXCERPT_REFERENCE)
+    rows = [reference.marker_names.index(name) for name in BODY]
+    columns = [LANDMARKS.index(POSE2SIM_FROM_LANDMARKS[name]) for name in BODY]
+    frames = reference.positions.shape[0]
+    landmarks = np.full((len(toml_cameras), frames, len(LANDMARKS), 2), np.nan)
+    for view, camera in enumerate(toml_cameras):
+        for frame in range(frames):
+            landmarks[view, frame, columns] = camera.project(reference.positions[frame, rows])
+    visibility = np.where(np.isfinite(landmarks[..., 0]), 1.0, 0.0)
+    from_toml, _ = triangulate_landmarks(toml_cameras, landmarks, visibility)
+    from_qualisys, _ = triangulate_landmarks(qualisys_cameras, landmarks, visibility)
+    for name in BODY:
+        assert np.isfinite(from_toml[name]).all()
+        assert np.max(np.linalg.norm(from_toml[name] - from_qualisys[name], axis=1)) < 1e-3, name
+
+
+@needs_mediapipe
+def test_the_detections_are_written_in_pose2sims_pose_layout(excerpt_clip, tmp_path):
+    out = tmp_path / "out"
+    code = main(["track", "--videos", str(excerpt_clip), "--calibration", str(EXCERPT / "calibration.toml"),
+                 "--quiet", "--no-image", "--out", str(out)])
+    assert code == 0
+    for camera in ("cam_01", "cam_02", "cam_03", "cam_04"):
+        folder = out / "pose" / f"{camera}_json"
+        assert (folder / f"{camera}_000000000000_keypoints.json").is_file()
+        frames = read_openpose_frames(folder)
+        assert len(frames) == 10
+        assert all(1 <= len(people) <= 3 for people in frames)
+        assert all(len(person) == 3 * len(LANDMARKS) for people in frames for person in people)
+    report = json.loads((out / "report.json").read_text())
+    assert report["people"]["found"] >= 2 and report["people"]["tracked"] == 1
+    assert set(report["stage_seconds"]) >= {"detection", "association", "triangulation", "calibration", "solve"}
+    assert 0 < report["end_to_end_frames_per_second"] < report["frames_per_second"]

@@ -28,6 +28,7 @@ from ibik_pin.app.silhouette_files import camera_folder_entries, check_video_siz
 from ibik_pin.app.video_people import DetectedPeople, PeopleReport, chosen_person, detect_people_in_videos
 from ibik_pin.exceptions import IbikWarning, InputError
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, write_calibration
+from ibik_pin.io.openpose import POSE_FOLDER, write_openpose_frames
 from ibik_pin.io.trc import TrcData, write_trc
 from ibik_pin.io.video import VideoReader, read_frames
 from ibik_pin.tracking.stack import Stack
@@ -131,6 +132,10 @@ def read_videos(staging: Path, job: TrackJob, cameras: Sequence, detected: Detec
             pose.masks = pose.masks.fitted(tuple(camera.size))
     timing = {"detection": detected.seconds["detection_wall"], "association": detected.seconds["association"]}
     people_report = detected.report(person)
+    for camera, people in zip(cameras, detected.views, strict=True):  # Pose2Sim's pose/ layout, for reuse
+        view = detected.names.index(camera.name)
+        write_openpose_frames(staging / POSE_FOLDER, camera.name, people.keypoints, people.visibility,
+                              detected.tracks.identity[view, :, : people.keypoints.shape[1]] + 1)
     worker_seconds = {key: detected.seconds[key] for key in ("decode", "detection")}
     start = time.perf_counter()
     extrinsics = None
