@@ -22,8 +22,11 @@ from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, read_calibration
 from ibik_pin.io.openpose import read_openpose_frames
 from ibik_pin.io.trc import read_trc
 from ibik_pin.vision.camera import cameras_in_frame
+from ibik_pin.vision.camera_diagnosis import diagnose_cameras
 from ibik_pin.vision.learned_pose import LANDMARKS, MEDIAPIPE_INSTALL, learned_pose_available
-from ibik_pin.vision.person_association import associate_people
+from ibik_pin.vision.mask_store import CroppedMasks
+from ibik_pin.vision.people import ViewPeople
+from ibik_pin.vision.person_association import PeopleTracks, associate_people
 from ibik_pin.vision.person_views import person_pose
 from ibik_pin.vision.triangulation import POSE2SIM_FROM_LANDMARKS, labelled_landmarks, triangulate_landmarks
 from tests.paths import SHARED_DATA, TEST_DATA
@@ -224,3 +227,38 @@ def test_the_detections_are_written_in_pose2sims_pose_layout(excerpt_clip, tmp_p
     assert report["people"]["found"] >= 2 and report["people"]["tracked"] == 1
     assert set(report["stage_seconds"]) >= {"detection", "association", "triangulation", "calibration", "solve"}
     assert 0 < report["end_to_end_frames_per_second"] < report["frames_per_second"]
+
+
+def _view(boxes_per_frame: list[list[tuple[float, float] | None]]) -> ViewPeople:
+    """A view whose trackers hold people whose landmarks span 100 px squares at the given corners."""
+    frames, slots = len(boxes_per_frame), len(boxes_per_frame[0])
+    keypoints = np.full((frames, slots, len(LANDMARKS), 2), np.nan)
+    rng = np.random.default_rng(7)
+    for frame, boxes in enumerate(boxes_per_frame):
+        for slot, corner in enumerate(boxes):
+            if corner is not None:
+                keypoints[frame, slot] = np.array(corner) + rng.uniform(0, 100, (len(LANDMARKS), 2))
+    visibility = np.where(np.isfinite(keypoints[..., 0]), 1.0, 0.0)
+    return ViewPeople(keypoints, visibility, [CroppedMasks((400, 400)) for _ in range(slots)], (400, 400))
+
+
+def test_a_disagreeing_camera_is_blamed_only_when_the_people_do_not_explain_it():
+    frames = 10
+    alone = _view([[(0, 0), None]] * frames)
+    crowded = _view([[(0, 0), (50, 50)]] * frames)  # someone else's box overlaps the subject's in every frame
+    switching = _view([[(0, 0), None]] * 5 + [[None, (0, 0)]] * 5)  # the subject passes to tracker 2
+    identity = np.full((4, frames, 2), -1)
+    identity[[0, 1, 3], :, 0] = 0
+    identity[2, :5, 0], identity[2, 5:, 1] = 0, 0
+    identity[1, :, 1] = 1
+    tracks = PeopleTracks(identity, [40, 10], [10, 0], np.zeros((2, frames, 3)))
+    names = ["cam_a", "cam_b", "cam_c", "cam_d"]
+    views = [alone, crowded, switching, alone]
+    def judged(camera: str) -> dict[str, str]:  # that camera 170 px off, the others 15-20 px
+        errors = {name: 170.0 if name == camera else 15.0 + index for index, name in enumerate(names)}
+        return diagnose_cameras(names, errors, views, tracks, 0)
+
+    assert judged("cam_b")["cam_a"] == "agrees"
+    assert "another person overlaps the subject in 10 of 10 frames" in judged("cam_b")["cam_b"]
+    assert "switched people" in judged("cam_c")["cam_c"] and "not the camera" in judged("cam_c")["cam_c"]
+    assert "the camera moved or is miscalibrated" in judged("cam_d")["cam_d"]

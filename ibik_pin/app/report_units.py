@@ -88,6 +88,9 @@ UNITS = {
     "end_to_end_seconds": "s: wall time of the whole run, from reading the inputs to the written outputs",
     "end_to_end_frames_per_second": ("frames per second of end_to_end_seconds: detection, triangulation, "
                                      "calibration and solve included (frames_per_second is the frame loop's)"),
+    "extrinsics.diagnosis": ("per camera: 'agrees', or why it disagrees with the others (more than twice their "
+                             "median): another person overlapping the subject, a detector that switched people, "
+                             "or the camera itself (moved or miscalibrated); vision.camera_diagnosis"),
     "extrinsics.turn_deg": "deg: how far each re-fitted camera turned about its centre",
     "extrinsics.refitted": "the cameras turned by --refit-cameras",
     "extrinsics.reprojection_after_px": "px: extrinsics.reprojection_px with the re-fitted cameras",
@@ -118,7 +121,7 @@ UNITS = {
     "diagnosis": ("what the run judged of its own evidence (app.diagnosis; docs/method.md, Self-diagnosis): the "
                   "diagnosis.* entries"),
     "diagnosis.findings": ("every suspect view or frame: cause (view_targets_outside, view_empty, "
-                           "view_mostly_foreground, "
+                           "view_mostly_foreground, axes_body_lying, "
                            "view_skeleton_outside, frame_jump, frame_step, frame_residual), subject (camera name or "
                            "TRC frame number), figure and threshold (in the unit of the cause's threshold in "
                            "diagnosis.thresholds; 0-1 shares for views), consequence (what the run did)"),

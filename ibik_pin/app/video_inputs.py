@@ -32,6 +32,7 @@ from ibik_pin.io.openpose import POSE_FOLDER, write_openpose_frames
 from ibik_pin.io.trc import TrcData, write_trc
 from ibik_pin.io.video import VideoReader, read_frames
 from ibik_pin.tracking.stack import Stack
+from ibik_pin.vision.camera_diagnosis import diagnose_cameras
 from ibik_pin.vision.extrinsics_refit import ExtrinsicsRefit, in_calibration_world, refit_extrinsics
 from ibik_pin.vision.learned_pose import MEDIAPIPE_INSTALL, VideoPose, detect_pose_in_frames, learned_pose_available
 from ibik_pin.vision.mask_store import CroppedMasks
@@ -144,6 +145,8 @@ def read_videos(staging: Path, job: TrackJob, cameras: Sequence, detected: Detec
     if triangulated is not None and len(cameras) >= 3:
         cameras, extrinsics = refitted_cameras(cameras, poses, job.refit_cameras or (),
                                                triangulated[1]["views_swapped"])
+        extrinsics.diagnosis = diagnose_cameras([camera.name for camera in cameras], extrinsics.reprojection_px,
+                                                detected.views, detected.tracks, person)
         if extrinsics.refitted:
             write_calibration(staging / REFITTED_CALIBRATION, in_calibration_world(cameras, POSE2SIM_TRC_TO_WORLD))
             triangulated = None

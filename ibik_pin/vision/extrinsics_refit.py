@@ -51,12 +51,15 @@ class ExtrinsicsRefit:
             other views triangulate, projected [px], with the cameras as calibrated.
         reprojection_after_px: the same with the re-fitted cameras.
         turn_deg: per re-fitted camera, how far it turned.
+        diagnosis: per camera, "agrees" or why it disagrees: another person, a detector that
+            switched people, or the camera itself (vision.camera_diagnosis); empty when not judged.
     """
 
     refitted: list[str] = field(default_factory=list)
     reprojection_px: dict[str, float] = field(default_factory=dict)
     reprojection_after_px: dict[str, float] = field(default_factory=dict)
     turn_deg: dict[str, float] = field(default_factory=dict)
+    diagnosis: dict[str, str] = field(default_factory=dict)
 
 
 def _matches(cameras: Sequence[PinholeCamera], landmarks: np.ndarray, weights: np.ndarray,
