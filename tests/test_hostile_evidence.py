@@ -26,6 +26,7 @@ import cv2
 import numpy as np
 import pytest
 
+from ibik_pin.app.axes import TRC_TO_MODEL
 from ibik_pin.app.demo import prepare_demo_inputs
 from ibik_pin.app.diagnosis import FRAME_RESIDUAL_FLOOR_M, VIEW_FLOOR
 from ibik_pin.app.input_checks import JUMP_DISTANCE_M
@@ -148,6 +149,16 @@ def _targets_shifted(frame: int, names: tuple[str, ...], shift) -> Callable[[Cas
     return setup
 
 
+def _targets_turned_to_z_up(extra: list[str]) -> Callable[[Case], list[str]]:
+    """The targets written in the calibration's Z-up world (as a Z-up TRC holds them)."""
+    def setup(case: Case) -> list[str]:
+        def change(data):
+            data.positions = np.asarray(data.positions, dtype=float) @ TRC_TO_MODEL["z-up"]
+        case.edit_trc(case.targets, change)
+        return extra
+    return setup
+
+
 def _static_cell(marker: str, axis: int, value: float) -> Callable[[Case], None]:
     def setup(case: Case) -> None:
         def change(data):
@@ -218,6 +229,12 @@ WARNED: list[tuple[str, Callable, dict[str, list[str]], list[str]]] = [
      [VIEW_WARNING.format(camera="cam1"), FOREGROUND_WARNING.format(cameras="cam1 0\\.9\\d")]),
     ("one_view_empty_in_every_frame", lambda c: _each_mask(c, ("cam1",), np.zeros_like),
      {"view_empty": ["cam1"]}, [r"^--masks: view\(s\) cam1: every sampled silhouette \(16 frames\) is empty"]),
+    ("trc_axes_forced_z_up_without_the_image", lambda c: ["--trc-axes", "z-up", "--no-image"],
+     {"axes_body_lying": ["z-up"]},
+     [r"^--trc-axes z-up: the body lies down \(the cosine .* is -?0\.0\d, .* under y-up it stands \(1\.00\)"]),
+    ("z_up_targets_forced_y_up_without_the_image", _targets_turned_to_z_up(["--trc-axes", "y-up", "--no-image"]),
+     {"axes_body_lying": ["y-up"]},
+     [r"^--trc-axes y-up: the body lies down .* under z-up it stands \(1\.00\); are the TRC's axes z-up\?"]),
     ("one_frame_shifted_1e6_m", _frames_shifted([10], [1e6, 0.0, 0.0]),
      {"frame_jump": ["11"]}, [JUMP_WARNING.format(count=1, frame=11) + r"1e\+06 m\)"]),
     ("one_frame_shifted_1e200_m", _frames_shifted([10], [0.0, 1e200, 0.0]),

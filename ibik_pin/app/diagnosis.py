@@ -29,12 +29,12 @@ from typing import Any
 
 import numpy as np
 
-from ibik_pin.app.axes import AxesChoice
+from ibik_pin.app.axes import MIN_UPRIGHT, AxesChoice
 from ibik_pin.app.input_checks import JUMP_DISTANCE_M, FrameJumps
 from ibik_pin.exceptions import IbikWarning, InputError
 
 __all__ = ["EVIDENCE_FRAMES", "FRAME_RESIDUAL_FLOOR_M", "FRAME_RESIDUAL_RATIO", "MAX_FOREGROUND", "VIEW_FLOOR",
-           "VIEW_RATIO", "Diagnosis", "Finding", "ViewEvidence", "add_jumps", "axes_hint", "check_views",
+           "VIEW_RATIO", "Diagnosis", "Finding", "ViewEvidence", "add_jumps", "axes_hint", "check_axes", "check_views",
            "diagnose_result", "view_evidence"]
 
 # A view holds the subject when at least this share of the projected targets falls inside its
@@ -61,6 +61,7 @@ CAUSES = {
     "view_empty": "a view's silhouettes are empty in every sampled frame",
     "view_mostly_foreground": "a view's silhouettes cover most of the image (inverted, or the wrong channel?)",
     "view_skeleton_outside": "a view's silhouettes hold too little of the tracked skeleton",
+    "axes_body_lying": "under the TRC axes given, the body lies down; under the other convention it stands",
     "frame_jump": "a frame's targets all leapt away from the frames on either side and back (dropped)",
     "frame_step": "the whole body moved faster than a body can into a frame and stayed there (kept)",
     "frame_residual": "a frame's end-effector residual is far above the trial's",
@@ -313,3 +314,22 @@ def axes_hint(choice: AxesChoice) -> str:
     others = [score for score in choice.scores if score.axes != choice.axes and score.inside_silhouettes is not None]
     return "".join(f"; with --trc-axes {score.axes}, {score.inside_silhouettes:.2f} of the sampled targets fall "
                    "inside the silhouettes" for score in others)
+
+
+def check_axes(diagnosis: Diagnosis, choice: AxesChoice) -> None:
+    """Warn (once) when the TRC axes the user forced, or a C3D file declared, lay the body down
+    while the other convention stands it up (the median cosine of its feet-to-head direction with
+    the up axis under MIN_UPRIGHT, the other's at least MIN_UPRIGHT); detected axes were chosen on
+    the cameras' evidence, and a run without calibration says so in app.axes."""
+    if choice.how not in ("forced", "declared by the C3D file"):
+        return
+    used = next((score for score in choice.scores if score.axes == choice.axes), None)
+    others = [score for score in choice.scores if score.axes != choice.axes and score.upright is not None
+              and score.upright >= MIN_UPRIGHT]
+    if used is None or used.upright is None or used.upright >= MIN_UPRIGHT or not others:
+        return
+    diagnosis.findings.append(Finding("axes_body_lying", choice.axes, float(used.upright), MIN_UPRIGHT, "kept"))
+    source = "--trc-axes" if choice.how == "forced" else "the C3D file's declared axes"
+    _warn_once(f"{source} {choice.axes}: the body lies down (the cosine of its feet-to-head direction with the up "
+               f"axis is {used.upright:.2f}, median over the sampled frames; upright from {MIN_UPRIGHT:.2f}), while "
+               f"under {others[0].axes} it stands ({others[0].upright:.2f}); are the TRC's axes {others[0].axes}?")

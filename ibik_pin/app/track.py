@@ -19,7 +19,15 @@ import numpy as np
 from tqdm import tqdm
 
 from ibik_pin.app.axes import TRC_AXES, TRC_TO_MODEL, choose_axes, sample_frames
-from ibik_pin.app.diagnosis import Diagnosis, add_jumps, axes_hint, check_views, diagnose_result, view_evidence
+from ibik_pin.app.diagnosis import (
+    Diagnosis,
+    add_jumps,
+    axes_hint,
+    check_axes,
+    check_views,
+    diagnose_result,
+    view_evidence,
+)
 from ibik_pin.app.dropped_frames import SolvedFramesSource, expand_to_frames
 from ibik_pin.app.input_checks import (
     check_camera_focal_lengths,
@@ -258,6 +266,7 @@ def _run_into(staging: Path, job: TrackJob, detected: DetectedPeople | None = No
                                 "--masks" if job.masks is not None else "--videos", trc.frame_numbers,
                                 axes_hint(axes))
     add_jumps(diagnosis, jumps, trc.frame_numbers)
+    check_axes(diagnosis, axes)
     # Every keypoint scales the segments, tracked or not.
     stages = dict(videos.stage_seconds)
     calibration_started = time.perf_counter()
