@@ -369,6 +369,7 @@ def opensim_section() -> list[str]:
     if not (RESULTS / "opensim_speed.json").is_file():
         return []
     data = load("opensim_speed.json")
+    one_thread = all("ibik_image_one_thread_solve_fps" in row for row in data["conditions"].values())
 
     def ratio(row: dict, key: str) -> str:
         values = row.get(f"{key}_rounds")
@@ -377,6 +378,8 @@ def opensim_section() -> list[str]:
     rows = [[f"{row['motion']}, {row['views']} views", f"{row['ibik_image_solve_fps']:.0f}",
              f"{row['opensim_fps']:.0f}",
              ratio(row, "ibik_image_solve_over_opensim"), f"{row['ibik_image_loop_over_opensim']:.2f}",
+             *([ratio(row, "ibik_image_one_thread_solve_over_opensim"),
+                f"{row['ibik_image_one_thread_loop_over_opensim']:.2f}"] if one_thread else []),
              f"{row['ibik_image_whole_over_opensim_whole']:.2f}", f"{row['ibik_blind_solve_over_opensim']:.2f}",
              mm(row.get("ibik_image_judged_error_mm")), f"{row['opensim_marker_rms_mm']:.1f}"]
             for row in data["conditions"].values()]
@@ -386,17 +389,21 @@ def opensim_section() -> list[str]:
         "",
         f"`{data['command']}` (`experiments/results/opensim_speed.json`; code at {data['revision']}). OpenSim 4.6's",
         "InverseKinematicsTool (C++, one thread, blind) on the model.osim `ibik track` wrote, toward the same",
-        "targets file (every target keypoint, weight 1), alternated with `ibik track` with the image and blind",
-        f"in each of {data['rounds']} rounds; each ratio is the median of the rounds' ratios (their range in",
-        "brackets). ibik's frame rate is report.json's of the solves alone (the support images are built in",
-        "its second process, as by default); OpenSim's is frames over the tool's run (reading the TRC, the",
-        "solves, writing the .mot). \"whole\": the whole run_track call (subject calibration, every output",
-        "written) against loading model.osim and running the tool. Real motion: the real-mocap benchmark's",
-        "clean inputs (640 x 480); demo: `ibik demo`'s inputs. The machine was shared with other sessions",
-        f"(load average {before:.1f} at the start, {after:.1f} at the end on 2 cores): the ratios moved with",
-        "the load, absolute figures more.",
+        "targets file (every target keypoint, weight 1), alternated with `ibik track` with the image, blind,",
+        f"and with the image on one thread, in each of {data['rounds']} rounds; each ratio is the median of the",
+        "rounds' ratios (their range in brackets). ibik's frame rates are report.json's, of the solves alone",
+        "and of the whole frame loop; by default the support images are built in a second process while the",
+        "frame before is solved, on one thread (`--read-ahead off`) between the solves. OpenSim's: frames over",
+        "the tool's run (reading the TRC, the solves, writing the .mot). \"whole\": the whole run_track call",
+        "(subject calibration, every output written) against loading model.osim and running the tool. Real",
+        "motion: the real-mocap benchmark's clean inputs (640 x 480); demo: `ibik demo`'s inputs. The machine",
+        f"was shared with other sessions (load average {before:.1f} at the start, {after:.1f} at the end on 2",
+        "cores), and the solves ran about 2x faster on one thread: most likely the kernel's share for each",
+        "session (autogroup scheduling is on here), which ibik's process and its child split, where a quiet",
+        "machine gives the child the idle core.",
         "",
         *table(["motion, views", "ibik image [frames/s]", "OpenSim [frames/s]", "ratio, solves", "ratio, frame loop",
+                *(["ratio, solves on one thread", "ratio, its frame loop"] if one_thread else []),
                 "ratio, whole", "ratio, ibik blind", "ibik error [mm]", "OpenSim marker RMS [mm]"], rows),
         "",
     ]
@@ -410,7 +417,8 @@ def solve_time_section() -> list[str]:
     rows = []
     for condition, variants in data["conditions"].items():
         for name, figures in variants.items():
-            rows.append([condition, f"{name} {figures['overrides'] or ''}".strip(), f"{figures['solve_fps']:.0f}",
+            settings = ", ".join(f"{key}={value}" for key, value in figures["overrides"].items())
+            rows.append([condition, f"{name} ({settings or 'defaults'})", f"{figures['solve_fps']:.0f}",
                          f"{figures['over_base']:.2f}",
                          *(f"{100 * figures['share'][part]:.0f} %" for part in figures["share"]),
                          f"{figures['steps_per_frame']:.1f}", f"{figures['steps_per_frame_before_peak_check']:.1f}",
