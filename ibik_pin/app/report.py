@@ -188,6 +188,7 @@ class TrackingReport:
         mean_iterations_per_frame: steps the main solves took, mean over the frames after the
             first (below iterations_per_frame when image_stop or step_tolerance ends them early).
         step_tolerance: the settings' step_tolerance [rad], or None.
+        target_step_tolerance: the settings' target_step_tolerance [rad], or None.
         image_stop: the settings' image_stop ("peak" or "count").
         mask_filter_radius: temporal majority filter radius of the silhouettes [frames].
         solve_frames_per_second: frames solved per second of solver time [Hz]; None if unmeasured.
@@ -264,6 +265,7 @@ class TrackingReport:
     frames_with_outlier_targets: dict[str, list[str]] = field(default_factory=dict)
     mean_iterations_per_frame: float | None = None
     step_tolerance: float | None = None
+    target_step_tolerance: float | None = None
     image_stop: str | None = None
     silhouettes: SilhouetteQuality | None = None
     triangulation: TriangulationReport | None = None
@@ -341,6 +343,7 @@ class TrackingReport:
             mean_iterations_per_frame=(float(np.mean(result.iterations[1:])) if len(result.iterations) > 1
                                        else None),
             step_tolerance=settings.step_tolerance,
+            target_step_tolerance=settings.target_step_tolerance,
             image_stop=settings.image_stop,
             frames_with_outlier_targets={} if outliers is None else by_frame(
                 [[name for name, out in zip(result.target_names, row, strict=True) if out] for row in outliers]),

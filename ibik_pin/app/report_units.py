@@ -30,6 +30,7 @@ UNITS = {
     "iterations_per_frame": "solver steps per frame after the first",
     "mean_iterations_per_frame": "solver steps of a frame's main solve, mean over the frames after the first",
     "step_tolerance": "rad: the step norm under which a frame's main solve stops (null: never early)",
+    "target_step_tolerance": "rad: the step norm under which a frame's targets-only steps stop (null: never early)",
     "image_stop": "where the image steps end: peak (the criterion stopped rising) or count (iterations_per_frame)",
     "mask_filter_radius": "frames on each side of the temporal majority filter",
     "end_effector_residual_m": "m: per frame, the mean distance of the present targets to the model's keypoints",
