@@ -34,8 +34,8 @@ from ibik_pin.app.input_checks import JUMP_DISTANCE_M, FrameJumps
 from ibik_pin.exceptions import IbikWarning, InputError
 
 __all__ = ["EVIDENCE_FRAMES", "FRAME_RESIDUAL_FLOOR_M", "FRAME_RESIDUAL_RATIO", "MAX_FOREGROUND", "VIEW_FLOOR",
-           "VIEW_RATIO", "Diagnosis", "Finding", "ViewEvidence", "add_jumps", "axes_hint", "check_axes", "check_views",
-           "diagnose_result", "view_evidence"]
+           "VIEW_RATIO", "Diagnosis", "Finding", "ViewEvidence", "ViewsLeftOut", "add_jumps", "axes_hint",
+           "check_axes", "check_views", "diagnose_result", "view_evidence"]
 
 # A view holds the subject when at least this share of the projected targets falls inside its
 # silhouette (median over the sampled frames), and at least VIEW_RATIO of the best view's share.
@@ -126,6 +126,7 @@ class Diagnosis:
         sampled_frames: TRC frame numbers of those frames.
         foreground_sampled: per camera, the median share of the image its silhouette covers over
             the same frames [0-1].
+        views_left_out: the cameras left out of the image term, their targets' share too low.
         skeleton_inside_median: per camera, the median over the frames of the tracked skeleton's
             share inside the silhouette [0-1] (after the solve).
         departure_per_frame_m: per frame, how far its targets lie (median over them) from where the
@@ -137,6 +138,7 @@ class Diagnosis:
     targets_inside_sampled: dict[str, float | None] = field(default_factory=dict)
     sampled_frames: list[int] = field(default_factory=list)
     foreground_sampled: dict[str, float] = field(default_factory=dict)
+    views_left_out: list[str] = field(default_factory=list)
     skeleton_inside_median: dict[str, float | None] = field(default_factory=dict)
     departure_per_frame_m: list[float | None] = field(default_factory=list)
     thresholds: dict[str, float] = field(default_factory=lambda: {
@@ -223,13 +225,13 @@ def check_views(evidence: ViewEvidence, option: str, frame_numbers: Sequence[int
                if share < VIEW_FLOOR or share < VIEW_RATIO * best}
     for name, share in suspect.items():
         diagnosis.findings.append(Finding("view_targets_outside", name, share, max(VIEW_FLOOR, VIEW_RATIO * best),
-                                          "kept; its image term may pull the skeleton wrong"))
+                                          "left out of the image term (its silhouettes taken as empty)"))
     if suspect:
         listed = ", ".join(f"{name} {share:.2f}" for name, share in suspect.items())
         _warn_once(f"{option}: view(s) {listed}: share of the projected targets inside the silhouette (median "
                    f"over {len(evidence.frames)} frames), under {VIEW_FLOOR:g} or under {VIEW_RATIO:g} x the best "
-                   f"view's {best:.2f}; are these cameras' silhouettes swapped, mirrored, of another moment, or "
-                   "their calibration wrong?")
+                   f"view's {best:.2f}; left out of the image term: are these cameras' silhouettes swapped, "
+                   "mirrored, of another moment, or their calibration wrong?")
     covering = {name: share for name, share in evidence.median_foreground().items() if share > MAX_FOREGROUND}
     for name, share in covering.items():
         diagnosis.findings.append(Finding("view_mostly_foreground", name, share, MAX_FOREGROUND, "kept"))
@@ -239,6 +241,7 @@ def check_views(evidence: ViewEvidence, option: str, frame_numbers: Sequence[int
                    f"{len(evidence.frames)} frames), over {MAX_FOREGROUND:g}; is the background read as the subject "
                    "(inverted masks, or the wrong channel)?")
     diagnosis.foreground_sampled = evidence.median_foreground()
+    diagnosis.views_left_out = list(suspect)
     for name in empty:
         diagnosis.findings.append(Finding("view_empty", name, None, None,
                                           "left out of the image term in every frame whose silhouette is empty"))
@@ -246,6 +249,24 @@ def check_views(evidence: ViewEvidence, option: str, frame_numbers: Sequence[int
         _warn_once(f"{option}: view(s) {', '.join(empty)}: every sampled silhouette ({len(evidence.frames)} "
                    "frames) is empty; left out where empty")
     return diagnosis
+
+
+class ViewsLeftOut:
+    """The silhouettes with those of the views left out taken as empty: the tracker disables a view
+    whose silhouette is empty, so its image term pulls nothing.
+
+    Args:
+        source: frame index -> its masks, one per camera.
+        left_out: the indices of the cameras left out.
+    """
+
+    def __init__(self, source: Callable[[int], Sequence[np.ndarray]], left_out: Sequence[int]) -> None:
+        self._source = source
+        self._left_out = set(left_out)
+
+    def __call__(self, frame: int) -> list[np.ndarray]:
+        return [np.zeros_like(mask) if index in self._left_out else mask
+                for index, mask in enumerate(self._source(frame))]
 
 
 def add_jumps(diagnosis: Diagnosis, jumps: FrameJumps, frame_numbers: Sequence[int] | np.ndarray) -> None:

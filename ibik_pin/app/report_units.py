@@ -132,6 +132,8 @@ UNITS = {
     "diagnosis.sampled_frames": "the TRC frame numbers targets_inside_sampled was measured on",
     "diagnosis.foreground_sampled": ("0-1: per camera, before the solve, the share of the image its silhouette "
                                      "covers, median over the sampled frames"),
+    "diagnosis.views_left_out": ("the cameras left out of the image term (their silhouettes taken as empty) because "
+                                 "their targets' share was too low; listed in frames_with_disabled_views too"),
     "diagnosis.skeleton_inside_median": ("0-1: per camera, after the solve, the median over the frames of "
                                          "inside_fraction_per_view"),
     "diagnosis.departure_per_frame_m": ("m: per frame, the median over its targets of the distance to where the "

@@ -11,7 +11,7 @@ import shutil
 import sys
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -21,6 +21,7 @@ from tqdm import tqdm
 from ibik_pin.app.axes import TRC_AXES, TRC_TO_MODEL, choose_axes, sample_frames
 from ibik_pin.app.diagnosis import (
     Diagnosis,
+    ViewsLeftOut,
     add_jumps,
     axes_hint,
     check_axes,
@@ -284,7 +285,11 @@ def _run_into(staging: Path, job: TrackJob, detected: DetectedPeople | None = No
     use_image = settings.use_image
     tracker = Tracker(body, cameras if use_image else [], settings)
     solved = np.flatnonzero(~jumps.dropped)  # the frames of whole-body jumps are not solved
-    source = reader if reader is None or len(solved) == frame_count else SolvedFramesSource(reader, solved)
+    source: Callable[[int], Sequence[np.ndarray]] | None = (
+        reader if reader is None or len(solved) == frame_count else SolvedFramesSource(reader, solved))
+    if source is not None and diagnosis.views_left_out:  # suspect views (app.diagnosis) pull nothing
+        source = ViewsLeftOut(source, [index for index, camera in enumerate(cameras)
+                                       if camera.name in diagnosis.views_left_out])
     solve_started = time.perf_counter()
     with tqdm(total=len(solved), desc="tracking", unit="frame", disable=True if job.quiet else None) as bar:
         result = tracker.track([names[index] for index in tracked], targets_m[solved][:, tracked],
