@@ -10,10 +10,16 @@ good inputs and on broken ones, so that each threshold sits with a margin betwee
    silhouette over sampled frames, on the sweep's 42 conditions (experiments/sweep.py --keep: clean
    silhouettes and Section 4's defects, 4 views), and on the same conditions broken: cam1's and
    cam2's masks swapped, cam1's masks mirrored or of another moment, cam1's focal length 1e-300 or
-   its rotation vector 1e12, the TRC's axes forced wrong (z-up on Y-up data).
+   its rotation vector 1e12 or its focal length 2x, cam1 moved 0.5 m, the TRC's axes forced wrong
+   (z-up on Y-up data); and the share of the image each silhouette covers.
+3. The shifted frame (--timing): the demo (120 frames, 4 views) as it is and with frame 11's targets
+   shifted by 1e6, 1e200 and 0.5 m, alternated 3 times: time ratios and joint differences.
+4. Pose2Sim's real video (--pose2sim): tracked with background subtraction and MediaPipe's
+   silhouettes; the diagnosis and warnings of these good runs.
 
-Usage:
-    python experiments/diagnosis_thresholds.py --sweep-inputs /tmp/sweep_inputs --out experiments/results
+Usage (the sweep's conditions kept by `python experiments/sweep.py --keep /tmp/sweep_inputs`):
+    python experiments/diagnosis_thresholds.py --sweep-inputs /tmp/sweep_inputs --timing out/diag_timing \
+        --pose2sim out/diag_pose2sim --out experiments/results
 """
 
 from __future__ import annotations
