@@ -262,3 +262,20 @@ def test_a_disagreeing_camera_is_blamed_only_when_the_people_do_not_explain_it()
     assert "another person overlaps the subject in 10 of 10 frames" in judged("cam_b")["cam_b"]
     assert "switched people" in judged("cam_c")["cam_c"] and "not the camera" in judged("cam_c")["cam_c"]
     assert "the camera moved or is miscalibrated" in judged("cam_d")["cam_d"]
+
+
+@needs_mediapipe
+def test_person_all_tracks_each_person_into_a_folder_and_a_wrong_number_is_refused(excerpt_clip, tmp_path, capsys):
+    out = tmp_path / "out"
+    common = ["track", "--videos", str(excerpt_clip), "--calibration", str(EXCERPT / "calibration.toml"), "--quiet",
+              "--no-image"]
+    assert main([*common, "--person", "all", "--out", str(out)]) == 0
+    folders = sorted(path.name for path in out.iterdir() if path.is_dir())
+    assert folders[0] == "person_1" and all(name.startswith("person_") for name in folders)
+    for number, name in enumerate(folders, start=1):
+        report = json.loads((out / name / "report.json").read_text())
+        assert report["people"]["tracked"] == number
+    capsys.readouterr()
+    assert main([*common, "--person", "9", "--out", str(tmp_path / "nine")]) == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and "--person" in error[0], error

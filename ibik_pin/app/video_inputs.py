@@ -1,11 +1,12 @@
 """What `ibik track --videos` takes from the videos themselves: learned silhouettes of the subject,
 and, without --targets, the end effectors triangulated from the same detections.
 
-One MediaPipe Pose pass per camera (vision.learned_pose) gives both the person's segmentation and
-its 2D landmarks; the landmarks of all cameras triangulate into Pose2Sim's keypoints
-(vision.triangulation). A mask is then cut down to the subject: only the connected parts that hold
-a projected target (given or triangulated) are kept, so that a second person or a stray blob the
-other views deny never pulls the skeleton.
+MediaPipe Pose's trackers find every person in every camera (app.video_people, vision.people): their
+segmentations and 2D landmarks, associated across the views into people, of whom --person names the
+one to track (vision.person_association, vision.person_views); that person's landmarks in all
+cameras triangulate into Pose2Sim's keypoints (vision.triangulation). A mask is then cut down to
+the subject: only the connected parts that hold a projected target (given or triangulated) are
+kept, so that a stray blob the other views deny never pulls the skeleton.
 """
 
 from __future__ import annotations
@@ -19,7 +20,6 @@ from typing import cast
 
 import cv2
 import numpy as np
-from tqdm import tqdm
 
 from ibik_pin.app.input_reports import SilhouetteQuality, TriangulationReport
 from ibik_pin.app.job import SEGMENTERS, TrackJob
@@ -30,17 +30,17 @@ from ibik_pin.exceptions import IbikWarning, InputError
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, write_calibration
 from ibik_pin.io.openpose import POSE_FOLDER, write_openpose_frames
 from ibik_pin.io.trc import TrcData, write_trc
-from ibik_pin.io.video import VideoReader, read_frames
+from ibik_pin.io.video import VideoReader
 from ibik_pin.tracking.stack import Stack
 from ibik_pin.vision.camera_diagnosis import diagnose_cameras
 from ibik_pin.vision.extrinsics_refit import ExtrinsicsRefit, in_calibration_world, refit_extrinsics
-from ibik_pin.vision.learned_pose import MEDIAPIPE_INSTALL, VideoPose, detect_pose_in_frames, learned_pose_available
+from ibik_pin.vision.learned_pose import MEDIAPIPE_INSTALL, VideoPose, learned_pose_available
 from ibik_pin.vision.mask_store import CroppedMasks
 from ibik_pin.vision.person_views import person_pose
 from ibik_pin.vision.triangulation import labelled_landmarks, triangulate_landmarks
 
 __all__ = ["LIMB_KEYPOINTS", "REFITTED_CALIBRATION", "TRIANGULATED_TRC", "SilhouetteQualityReader", "VideoSources",
-           "detect_videos", "detect_videos_people", "keep_subject",
+           "detect_videos_people", "keep_subject",
            "points_inside", "read_videos", "refitted_cameras", "resolve_segmenter", "restrict_to_subject",
            "triangulated_trc"]
 
@@ -223,7 +223,8 @@ def resolve_segmenter(requested: str, keypoints_needed: bool) -> str:
 
 def detect_videos_people(videos: dict[str, Path], cameras: Sequence, progress: bool) -> DetectedPeople:
     """Every camera's people, in parallel, associated across views (app.video_people)."""
-    sizes = {camera.name: check_video_size(videos[camera.name], camera) for camera in cameras}
+    for camera in cameras:  # a size unlike the calibration's is refused, or warned of (the masks are fitted)
+        check_video_size(videos[camera.name], camera)
     frames = 0
     for camera in cameras:
         with VideoReader(videos[camera.name]) as reader:
@@ -232,31 +233,7 @@ def detect_videos_people(videos: dict[str, Path], cameras: Sequence, progress: b
         fps = reader.fps
     # Without a frame rate the association's speed bound assumes 30 Hz: looser at a higher rate.
     rate = float(fps) if np.isfinite(fps) and fps > 0 else 30.0
-    del sizes  # checked (a warning for an encoder's alignment): the masks are fitted to each camera
     return detect_people_in_videos(videos, cameras, rate, progress=progress, total_frames=frames or None)
-
-
-def detect_videos(videos: dict[str, Path], cameras: Sequence, progress: bool) -> list[VideoPose]:
-    """MediaPipe Pose on every camera's video, masks fitted to the calibrated size."""
-    sizes = {camera.name: check_video_size(videos[camera.name], camera) for camera in cameras}
-    frames = 0
-    for camera in cameras:
-        with VideoReader(videos[camera.name]) as reader:
-            frames += max(reader.frame_count, 0)
-    poses = []
-    # disable=None draws the bar only when stderr is a terminal, so logs and pipes stay clean.
-    with tqdm(total=frames or None, desc="pose and silhouettes", unit="frame",
-              disable=None if progress else True) as bar:
-        for camera in cameras:
-            pose = detect_pose_in_frames(read_frames(videos[camera.name]), progress=bar.update)
-            if sizes[camera.name] != tuple(camera.size):
-                pose.masks = pose.masks.fitted(tuple(camera.size))
-            poses.append(pose)
-    counts = {camera.name: len(pose.masks) for camera, pose in zip(cameras, poses, strict=True)}
-    if len(set(counts.values())) > 1:
-        raise InputError(f"--videos: the cameras' videos have different frame counts {counts}; "
-                         "they must be synchronised and of equal length")
-    return poses
 
 
 def triangulated_trc(cameras: Sequence, poses: Sequence[VideoPose], frame_rate: float,

@@ -92,7 +92,8 @@ def _dlt(normalised: np.ndarray, extrinsics: np.ndarray, weights: np.ndarray) ->
     system = np.concatenate((rows_x * w[..., None], rows_y * w[..., None]), axis=0).transpose(1, 0, 2)
     _, _, vt = np.linalg.svd(system)
     homogeneous = vt[:, -1]
-    points = homogeneous[:, :3] / homogeneous[:, 3:4]
+    with np.errstate(divide="ignore", invalid="ignore"):  # a point no view sees: NaN just below
+        points = homogeneous[:, :3] / homogeneous[:, 3:4]
     points[usable.sum(axis=0) < 2] = np.nan
     return points
 
