@@ -177,6 +177,8 @@ def detect_people_in_videos(videos: dict[str, Path], cameras: Sequence, frame_ra
     settings = settings if settings is not None else DetectionSettings()
     names = [camera.name for camera in cameras]
     workers = max(1, min(workers or usable_cores(), len(names)))
+    if multiprocessing.current_process().daemon:  # a daemonic worker (a pool's) may not start processes
+        workers = 1
     views: list[ViewPeople | None] = [None] * len(names)
     decode = detection = 0.0
     start = time.perf_counter()
