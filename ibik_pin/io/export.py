@@ -387,9 +387,8 @@ def _check_configurations(model: pin.Model, q: np.ndarray, normalise: bool = Tru
     return q
 
 
-def _check_motion(
-    model: pin.Model, times: np.ndarray, q: np.ndarray, normalise: bool = True
-) -> tuple[np.ndarray, np.ndarray]:
+def _check_motion(model: pin.Model, times: np.ndarray, q: np.ndarray, normalise: bool = True,
+                  ) -> tuple[np.ndarray, np.ndarray]:
     """Times (F,) and configurations (F, nq), checked (see :func:`_check_configurations`)."""
     q = _check_configurations(model, q, normalise)
     times = as_float_array(times, "times")
