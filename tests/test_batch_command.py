@@ -86,9 +86,8 @@ def test_each_trials_outputs_are_those_of_ibik_track_on_it(session, tmp_path):
             assert (out / name / file).read_bytes() == (tmp_path / name / file).read_bytes(), (name, file)
         batch_report = json.loads((out / name / "report.json").read_text())
         track_report = json.loads((tmp_path / name / "report.json").read_text())
-        for report in (batch_report, track_report):
-            for timing in ("solve_frames_per_second", "solve_seconds", "frames_per_second", "loop_seconds",
-                           "compile_seconds"):
+        for report in (batch_report, track_report):  # the timings differ between any two runs
+            for timing in [key for key in report if key.endswith(("_seconds", "per_second"))]:
                 report.pop(timing)
         assert batch_report == track_report, name
 
