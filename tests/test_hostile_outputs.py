@@ -139,6 +139,10 @@ def test_a_rerun_keeps_the_users_files_replaces_ibiks_and_says_so_in_one_line(ca
     assert set(manifest.files) >= {"joints.trc", "q.csv", "motion.mot", "motion.bvh", "model.osim", "report.json"}
     assert not set(manifest.files) & set(kept)
     assert (case.out / "joints.trc").stat().st_mtime_ns != earlier_joints  # ibik's own: written again
+    report = json.loads((case.out / "report.json").read_text())
+    assert [name.rstrip("/") for name in report["kept_user_files"]] == [example]
+    assert [warning for warning in report["warnings"] if "ibik did not write there" in warning] == [
+        lines[0].removeprefix("ibik: warning: ")]
     assert sorted(p.name for p in case.root.iterdir()) == ["in", "out"]  # no staging or set-aside folder left
 
 
@@ -250,6 +254,8 @@ def test_a_camera_name_that_cannot_name_a_file_is_said_before_the_solve_and_sani
     assert len(lines) == 1 and f"camera {camera!r} cannot name a file as it is; its overlay video is {file}" in lines[0]
     assert (case.out / file).is_file() and (case.out / "overlay_cam2.mp4").is_file()
     assert file in read_manifest(case.out).files
+    said = json.loads((case.out / "report.json").read_text())["warnings"]
+    assert len(said) == 1 and f"camera {camera!r} cannot name a file as it is" in said[0], said
     assert tree_digest(case.inputs) == inputs
     assert not any(path.name.startswith("overlay") for path in case.root.rglob("*") if path.parent != case.out)
 

@@ -13,7 +13,9 @@ one of the inputs, or whose name no file system here can hold.
 from __future__ import annotations
 
 import errno
+import itertools
 import os
+import random
 import re
 import shutil
 import tempfile
@@ -204,18 +206,23 @@ def _carry(kept: Sequence[str], source: Path, staging: Path, racing: bool) -> li
     return carried
 
 
-def publish(staging: Path, out: Path, attempts: int = 20) -> list[str]:
+def publish(staging: Path, out: Path, patience_s: float = 60.0) -> list[str]:
     """Move the finished staging folder to OUTDIR; returns the user's paths kept from an earlier
     OUTDIR (see the module docstring).
 
     The staging folder's manifest lists what the run wrote; the user's paths of the earlier OUTDIR
     are carried into it; then the earlier OUTDIR is moved aside under a name of its own, the
     staging folder takes its place, and the earlier one is removed. When another run publishes
-    into the same OUTDIR in between, the move is tried again: the last run to finish wins, and
-    neither fails nor leaves a backup behind."""
+    into the same OUTDIR in between, the move is tried again, for up to `patience_s` seconds: the
+    last run to finish wins, and neither fails nor leaves a backup behind."""
     written = listed_files(staging)
     kept: list[str] = []
-    for _ in range(attempts):
+    give_up = time.monotonic() + patience_s
+    for attempt in itertools.count():
+        if attempt:  # another run published in between: a random pause keeps two runs from meeting again
+            if time.monotonic() > give_up:
+                break
+            time.sleep(random.uniform(0.0, 0.001 * min(attempt, 10)))
         previous = None
         if out.exists():
             if read_manifest(out) is not None:  # else another run is replacing it right now

@@ -233,6 +233,8 @@ class TrackingReport:
         detection_seconds: decoding and detection summed over the views' worker processes [s].
         end_to_end_seconds: wall time of the whole run, reading to writing [s].
         end_to_end_frames_per_second: frames per second of end_to_end_seconds, detection included.
+        warnings: every warning the run gave on stderr, in order, each once.
+        kept_user_files: the files of an earlier output that ibik did not write, kept in OUTDIR.
         units: :data:`UNITS`, written into the file so that it describes itself.
     """
 
@@ -277,6 +279,8 @@ class TrackingReport:
     detection_seconds: dict[str, float] | None = None
     end_to_end_seconds: float | None = None
     end_to_end_frames_per_second: float | None = None
+    warnings: list[str] = field(default_factory=list)
+    kept_user_files: list[str] = field(default_factory=list)
     units: dict[str, str] = field(default_factory=lambda: dict(UNITS))
 
     @classmethod

@@ -119,6 +119,9 @@ UNITS = {
                                   "change; a limb is only ever lengthened, to reach its targets"),
     "trial_lengths.evidence": ("per limb lengthened, what decided: the reach (98th percentile of the root-to-end "
                                "distance over 3-frame averages) [m], the segments' sum [m] and the factor"),
+    "warnings": "every warning the run gave on stderr (IbikWarning), in order, each once",
+    "kept_user_files": ("paths in OUTDIR that an earlier output held and ibik did not write (not in its manifest): "
+                        "kept beside the new outputs; empty folders end with /"),
     "diagnosis": ("what the run judged of its own evidence (app.diagnosis; docs/method.md, Self-diagnosis): the "
                   "diagnosis.* entries"),
     "diagnosis.findings": ("every suspect view or frame: cause (view_targets_outside, view_empty, "

@@ -11,7 +11,8 @@ import shutil
 import sys
 import time
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 
@@ -40,6 +41,7 @@ from ibik_pin.app.input_checks import (
     silhouettes_all_empty,
 )
 from ibik_pin.app.job import TrackJob
+from ibik_pin.app.manifest import user_paths
 from ibik_pin.app.options import as_options
 from ibik_pin.app.outdir import check_outdir, kept_message, make_staging, overlay_file_names, publish
 from ibik_pin.app.outputs import write_outputs
@@ -154,14 +156,37 @@ def run_track(job: TrackJob, detected: DetectedPeople | None = None) -> Tracking
     out = check_outdir(job.out, job.inputs)
     staging = make_staging(out)
     try:
-        report = _run_into(staging, job, detected)
+        with _warnings_recorded() as said:
+            report = _run_into(staging, job, detected)
+            kept_ahead = user_paths(out) if out.is_dir() else []
+            if kept_ahead:  # said before publishing, so that report.json lists it too
+                warnings.warn(kept_message(out, kept_ahead), IbikWarning, stacklevel=2)
+        report.warnings, report.kept_user_files = said, kept_ahead
+        report.write(staging / "report.json")
         kept = publish(staging, out)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
-    if kept:
+    if set(kept) - set(kept_ahead):  # the user added files while the run went on
         warnings.warn(kept_message(out, kept), IbikWarning, stacklevel=2)
     return report
+
+
+@contextmanager
+def _warnings_recorded() -> Iterator[list[str]]:
+    """Every IbikWarning shown inside, each once and in order, for report.json's `warnings`; each is
+    still shown as it comes."""
+    said: list[str] = []
+    with warnings.catch_warnings():
+        shown = warnings.showwarning
+
+        def record(message, category, *args, **kwargs):
+            if issubclass(category, IbikWarning) and str(message) not in said:
+                said.append(str(message))
+            shown(message, category, *args, **kwargs)
+
+        warnings.showwarning = record
+        yield said
 
 
 def _track_everyone(job: TrackJob) -> TrackingReport:
