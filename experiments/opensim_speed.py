@@ -99,14 +99,10 @@ def demo_condition(folder: Path) -> Condition:
     return Condition("demo", 4, paths.targets, len(read_trc(paths.targets).times), track)
 
 
-def opensim_ik(model_path: Path, targets: Path, work: Path) -> dict:
-    """OpenSim's InverseKinematicsTool on `targets` with `model_path`: seconds of tool.run() and of
-    the whole (model loaded, tool set up, run), and the RMS marker error of its fit [mm]."""
-    import opensim
-
-    opensim.Logger.setLevelString("warn")
-    opensim.Logger.removeFileSink()  # else opensim.log in the working directory
-    started = time.perf_counter()
+def _ik_tool(opensim, model_path: Path, targets: Path, work: Path, output: str, report_errors: bool):
+    """OpenSim's InverseKinematicsTool set up on `targets` with `model_path`, every marker a task of
+    weight 1 over the whole take; returns the tool, its model and the number of frames. The caller
+    holds the model while the tool runs: the tool only points to it (freed, the run crashes)."""
     model = opensim.Model(str(model_path))
     markers = opensim.TimeSeriesTableVec3(str(targets))
     tool = opensim.InverseKinematicsTool()
@@ -116,42 +112,39 @@ def opensim_ik(model_path: Path, targets: Path, work: Path) -> dict:
     tool.setStartTime(times[0])
     tool.setEndTime(times[-1])
     tool.setResultsDir(str(work))
-    tool.setOutputMotionFileName(str(work / "ik.mot"))
-    tool.set_report_errors(False)  # a marker-error file is written apart, once (marker_rms_mm)
+    tool.setOutputMotionFileName(str(work / output))
+    tool.set_report_errors(report_errors)
     for name in markers.getColumnLabels():
         task = opensim.IKMarkerTask()
         task.setName(name)
         task.setWeight(1.0)
         task.setApply(True)
         tool.getIKTaskSet().cloneAndAppend(task)
+    return tool, model, len(times)
+
+
+def opensim_ik(model_path: Path, targets: Path, work: Path) -> dict:
+    """OpenSim's InverseKinematicsTool on `targets` with `model_path`: seconds of tool.run() and of
+    the whole (model loaded, tool set up, run), and the number of frames."""
+    import opensim
+
+    opensim.Logger.setLevelString("warn")
+    opensim.Logger.removeFileSink()  # else opensim.log in the working directory
+    started = time.perf_counter()
+    # The marker-error file is written apart, once (opensim_marker_rms_mm).
+    tool, _model, frames = _ik_tool(opensim, model_path, targets, work, "ik.mot", report_errors=False)
     running = time.perf_counter()
     if not tool.run():
         raise RuntimeError(f"OpenSim's IK failed on {targets} with {model_path}")
     ended = time.perf_counter()
-    return {"run_s": ended - running, "whole_s": ended - started, "frames": len(times)}
+    return {"run_s": ended - running, "whole_s": ended - started, "frames": frames}
 
 
 def opensim_marker_rms_mm(model_path: Path, targets: Path, work: Path) -> float:
     """The mean over frames of OpenSim's RMS marker error [mm] (its _ik_marker_errors.sto), once."""
     import opensim
 
-    model = opensim.Model(str(model_path))
-    markers = opensim.TimeSeriesTableVec3(str(targets))
-    tool = opensim.InverseKinematicsTool()
-    tool.setModel(model)
-    tool.setMarkerDataFileName(str(targets))
-    times = markers.getIndependentColumn()
-    tool.setStartTime(times[0])
-    tool.setEndTime(times[-1])
-    tool.setResultsDir(str(work))
-    tool.setOutputMotionFileName(str(work / "ik_errors.mot"))
-    tool.set_report_errors(True)
-    for name in markers.getColumnLabels():
-        task = opensim.IKMarkerTask()
-        task.setName(name)
-        task.setWeight(1.0)
-        task.setApply(True)
-        tool.getIKTaskSet().cloneAndAppend(task)
+    tool, _model, _ = _ik_tool(opensim, model_path, targets, work, "ik_errors.mot", report_errors=True)
     tool.run()
     table = opensim.TimeSeriesTable(str(work / "_ik_marker_errors.sto"))
     return float(np.mean(table.getDependentColumn("marker_error_RMS").to_numpy()) * 1000.0)
