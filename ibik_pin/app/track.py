@@ -336,5 +336,4 @@ def _run_into(staging: Path, job: TrackJob, detected: DetectedPeople | None = No
     report.detection_seconds = videos.detection_seconds or None
     report.end_to_end_seconds = time.perf_counter() - started
     report.end_to_end_frames_per_second = frame_count / report.end_to_end_seconds
-    report.write(staging / "report.json")  # again, with the diagnosis and the timings
-    return report
+    return report  # run_track writes report.json again, with these and the run's warnings
