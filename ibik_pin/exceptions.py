@@ -23,6 +23,11 @@ class FileFormatError(InputError):
     """A file (TRC, MOT, BVH, ASF/AMC, calibration TOML, image, video) cannot be read."""
 
 
+class UnreconciledViewsError(InputError):
+    """The cameras' detections do not agree on a person (a wrong calibration, unsynchronised videos,
+    or people the detector mixes): refused rather than fit to a mixture."""
+
+
 class UnknownNameError(InputError, KeyError):
     """A frame, joint, keypoint or camera name that does not exist; the message lists the known ones."""
 

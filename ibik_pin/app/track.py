@@ -49,7 +49,7 @@ from ibik_pin.app.report import TrackingReport
 from ibik_pin.app.silhouette_files import camera_folder_entries, load_silhouettes
 from ibik_pin.app.video_inputs import SilhouetteQualityReader, detect_videos_people, read_videos, restrict_to_subject
 from ibik_pin.app.video_people import DetectedPeople
-from ibik_pin.exceptions import FileFormatError, IbikWarning, InputError
+from ibik_pin.exceptions import FileFormatError, IbikWarning, InputError, UnreconciledViewsError
 from ibik_pin.human import FOOT_KEYPOINTS, load_human
 from ibik_pin.io.c3d import c3d_axes, is_c3d
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, read_calibration
@@ -201,12 +201,10 @@ def _track_everyone(job: TrackJob) -> TrackingReport:
     for number in range(1, detected.tracks.count + 1):
         try:
             reports.append(run_track(replace(job, person=number, out=job.out / f"person_{number}"), detected))
-        except InputError as error:
-            if "cannot be reconciled" not in str(error):
-                raise
+        except UnreconciledViewsError:
             skipped.append(number)
     if not reports:
-        raise InputError("--person all: the views cannot be reconciled on anyone (a wrong calibration, "
+        raise UnreconciledViewsError("--person all: the views cannot be reconciled on anyone (a wrong calibration, "
                          "unsynchronised videos, or nobody seen by two cameras)")
     if skipped:
         warnings.warn(f"--person all: person(s) {', '.join(map(str, skipped))} seen in too few frames or views "

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from ibik_pin.exceptions import IbikError, InputError
+from ibik_pin.exceptions import IbikError, InputError, UnreconciledViewsError
 from ibik_pin.io.video import read_frames
 from ibik_pin.vision.people import DetectionSettings, ViewPeople, detect_people
 from ibik_pin.vision.person_association import PeopleTracks, associate_people
@@ -110,8 +110,9 @@ def parse_person(text: str | int) -> str | int:
 def chosen_person(person: str | int, tracks: PeopleTracks) -> int:
     """The 0-based person --person names ("auto": the rule's first)."""
     if tracks.count == 0:
-        raise InputError("--videos: no person is seen by two cameras that agree on where they are: the views "
-                         "cannot be reconciled (a wrong calibration, unsynchronised videos, or nobody in view)")
+        raise UnreconciledViewsError(
+            "--videos: no person is seen by two cameras that agree on where they are: the views cannot be "
+            "reconciled (a wrong calibration, unsynchronised videos, or nobody in view)")
     if person == "auto":
         return 0
     if not isinstance(person, int) or not 1 <= person <= tracks.count:

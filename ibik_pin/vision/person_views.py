@@ -9,7 +9,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ibik_pin.exceptions import InputError
+from ibik_pin.exceptions import InputError, UnreconciledViewsError
 from ibik_pin.vision.learned_pose import LANDMARKS, VideoPose
 from ibik_pin.vision.mask_store import CroppedMasks
 from ibik_pin.vision.people import ViewPeople
@@ -39,8 +39,8 @@ def person_pose(cameras: Sequence, views: Sequence[ViewPeople], tracks: PeopleTr
     views, which see it clear, place it.
 
     Raises:
-        InputError: the person is not triangulated in MIN_TRIANGULATED_SHARE of the frames: the
-            views cannot be reconciled.
+        UnreconciledViewsError: the person is not triangulated in MIN_TRIANGULATED_SHARE of the
+            frames, or too many views show people no other view confirms.
     """
     if not 0 <= person < tracks.count:
         raise InputError(f"person: expected 1 to {tracks.count}, found {person + 1}", parameter="person")
@@ -48,17 +48,18 @@ def person_pose(cameras: Sequence, views: Sequence[ViewPeople], tracks: PeopleTr
     triangulated = tracks.frames[person]
     frames = views[0].frames
     if triangulated < MIN_TRIANGULATED_SHARE * frames:
-        raise InputError(f"person {person + 1}: the views agree on this person in {triangulated} of {frames} "
-                         f"frames ({detected} detections): the views cannot be reconciled (a wrong calibration, "
-                         f"unsynchronised videos, or people the detector mixes)", parameter="person")
+        raise UnreconciledViewsError(
+            f"person {person + 1}: the views agree on this person in {triangulated} of {frames} frames "
+            f"({detected} detections): the views cannot be reconciled (a wrong calibration, unsynchronised "
+            "videos, or people the detector mixes)", parameter="person")
     in_frames = np.isfinite(tracks.centres_m[person, :, 0])
     used = (tracks.identity[:, in_frames] == person).any(axis=2).sum()
     unconfirmed = tracks.unconfirmed[in_frames].sum()
     if unconfirmed > MAX_UNCONFIRMED_SHARE * (used + unconfirmed):
-        raise InputError(f"person {person + 1}: in the {int(in_frames.sum())} frames two views agree on, "
-                         f"{int(unconfirmed)} views show people no other view confirms, against {int(used)} that "
-                         f"agree: the views cannot be reconciled (a wrong calibration or unsynchronised videos)",
-                         parameter="person")
+        raise UnreconciledViewsError(
+            f"person {person + 1}: in the {int(in_frames.sum())} frames two views agree on, {int(unconfirmed)} "
+            f"views show people no other view confirms, against {int(used)} that agree: the views cannot be "
+            "reconciled (a wrong calibration or unsynchronised videos)", parameter="person")
     poses = []
     for view, people in enumerate(views):
         keypoints = np.full((frames, len(LANDMARKS), 2), np.nan)
