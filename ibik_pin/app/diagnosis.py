@@ -31,6 +31,7 @@ import numpy as np
 
 from ibik_pin.app.axes import MIN_UPRIGHT, AxesChoice
 from ibik_pin.app.input_checks import JUMP_DISTANCE_M, FrameJumps
+from ibik_pin.app.video_inputs import points_inside
 from ibik_pin.exceptions import IbikWarning, InputError
 
 __all__ = ["EVIDENCE_FRAMES", "FRAME_RESIDUAL_FLOOR_M", "FRAME_RESIDUAL_RATIO", "MAX_FOREGROUND", "VIEW_FLOOR",
@@ -151,21 +152,6 @@ class Diagnosis:
         return dataclasses.asdict(self)
 
 
-def _points_inside(camera, mask: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """(N,) bool: each point (N, 3), projected to its nearest pixel, lies on the mask (False
-    outside the image or behind the camera)."""
-    projection = camera.project_with_jacobian(points)
-    with np.errstate(invalid="ignore", over="ignore"):
-        pixels = np.rint(projection.pixels)
-        height, width = mask.shape
-        seen = (projection.depth > 0) & (pixels[:, 0] >= 0) & (pixels[:, 0] < width) \
-            & (pixels[:, 1] >= 0) & (pixels[:, 1] < height)
-    hits = np.zeros(len(points), dtype=bool)
-    taken = pixels[seen].astype(int)
-    hits[seen] = mask[taken[:, 1], taken[:, 0]]
-    return hits
-
-
 def view_evidence(cameras: Sequence, masks_of_frame: Callable[[int], Sequence[np.ndarray]],
                   targets_m: np.ndarray, count: int = EVIDENCE_FRAMES) -> ViewEvidence:
     """Per camera, the share of the projected targets inside its silhouette on `count` frames
@@ -187,7 +173,7 @@ def view_evidence(cameras: Sequence, masks_of_frame: Callable[[int], Sequence[np
         points = points[np.isfinite(points).all(axis=1)]
         for column, (camera, mask) in enumerate(zip(cameras, masks_of_frame(frame), strict=True)):
             if mask.any():
-                shares[row, column] = float(np.mean(_points_inside(camera, mask, points)))
+                shares[row, column] = float(np.mean(points_inside(camera, mask, points)))
             foreground[row, column] = float(np.count_nonzero(mask)) / mask.size
     return ViewEvidence([camera.name for camera in cameras], frames, shares, foreground)
 

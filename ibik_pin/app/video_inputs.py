@@ -294,11 +294,17 @@ def keep_subject(mask: np.ndarray, pixels: np.ndarray, radius_px: np.ndarray) ->
 
 def points_inside(camera, mask: np.ndarray, points: np.ndarray) -> np.ndarray:
     """(N,) bool: each point (N, 3), projected to its nearest pixel, falls inside the camera's mask
-    (False outside the image)."""
-    pixels = np.round(camera.project(points)).astype(int)
-    seen = camera.contains(pixels)
-    hits = np.zeros(len(pixels), bool)
-    hits[seen] = mask[pixels[seen, 1], pixels[seen, 0]]
+    (False outside the image or behind the camera; a camera far off, as a broken calibration gives,
+    projects to no pixel rather than overflowing)."""
+    projection = camera.project_with_jacobian(points)
+    with np.errstate(invalid="ignore", over="ignore"):
+        pixels = np.rint(projection.pixels)
+        height, width = mask.shape
+        seen = (projection.depth > 0) & (pixels[:, 0] >= 0) & (pixels[:, 0] < width) \
+            & (pixels[:, 1] >= 0) & (pixels[:, 1] < height)
+    hits = np.zeros(len(points), dtype=bool)
+    taken = pixels[seen].astype(int)
+    hits[seen] = mask[taken[:, 1], taken[:, 0]]
     return hits
 
 
