@@ -52,3 +52,20 @@ def test_fitted_pads_or_cuts_at_the_right_and_bottom(masks):
 def test_a_mask_of_another_size_is_refused():
     with pytest.raises(InputError, match="expected 40 x 60"):
         CroppedMasks((60, 40), [np.zeros((60, 40), bool)])
+
+
+def test_crops_come_out_as_stored_and_go_in_without_the_full_frame(masks):
+    stored = CroppedMasks((60, 40), masks)
+    top, left, crop = stored.crop(0)
+    assert (top, left, crop.shape) == (5, 50, (7, 10))
+    assert stored.crop(2)[2].shape == (0, 0)  # empty
+    padded = np.zeros((12, 20), bool)
+    padded[3:10, 10:20] = masks[0][5:12, 50:60]  # the same silhouette with an empty margin
+    built = CroppedMasks((60, 40))
+    built.append_crop(2, 40, padded)
+    np.testing.assert_array_equal(built[0], masks[0])
+    assert built.crop(0)[:2] == (5, 50)  # cut to its own bounding box
+    built.set_crop(0, 0, 0, np.zeros((4, 4), bool))
+    assert not built[0].any()
+    with pytest.raises(InputError, match="leaves the 40 x 60 frame"):
+        built.append_crop(35, 0, np.ones((6, 2), bool))

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from ibik_pin.app.job import TrackJob
-from ibik_pin.app.video_inputs import read_videos, restrict_to_subject
+from ibik_pin.app.video_inputs import SUBJECT_MARGIN_M, keep_subject, read_videos, restrict_to_subject
 from ibik_pin.cli import main
 from ibik_pin.exceptions import InputError
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, read_calibration
@@ -23,6 +23,7 @@ from ibik_pin.io.trc import read_trc
 from ibik_pin.io.video import read_frames
 from ibik_pin.vision.camera import cameras_in_frame
 from ibik_pin.vision.learned_pose import MEDIAPIPE_INSTALL, detect_pose_in_frames, learned_pose_available
+from ibik_pin.vision.mask_store import CroppedMasks
 from tests.opensim_ik import opensim_ik_rms_deg, worst_beyond_tolerance
 from tests.paths import TEST_DATA
 from tests.report_checks import undefined_keys
@@ -101,6 +102,30 @@ def test_learned_silhouettes_hold_the_subject_and_nobody_else(cameras, reference
             assert len(rows) > 0.02 * mask.size
             assert columns.min() >= low[0] - margin and columns.max() <= high[0] + margin, camera.name
             assert rows.min() >= low[1] - margin and rows.max() <= high[1] + margin, camera.name
+
+
+def test_restricting_within_the_crops_keeps_what_the_full_frames_keep(cameras, reference):
+    """restrict_to_subject cuts each stored crop; keep_subject on the rebuilt full frame is the rule."""
+    generator = np.random.default_rng(3)
+    camera = cameras[0]
+    width, height = camera.size
+    points = np.stack([reference[name] for name in MEASURED], axis=1)  # (F, 13, 3)
+    frames = []
+    for frame_points in points:
+        mask = np.zeros((height, width), bool)
+        for u, v in camera.project(frame_points)[::3]:  # blobs on some targets, and strays away from them
+            mask[max(int(v) - 4, 0): int(v) + 4, max(int(u) - 3, 0): int(u) + 3] = True
+        for u, v in generator.uniform((0, 0), (width - 8, height - 8), (3, 2)).astype(int):
+            mask[v: v + 6, u: u + 6] = True
+        frames.append(mask)
+    masks = CroppedMasks((width, height), frames)
+    restrict_to_subject([masks], [camera], points)
+    kept_pixels = 0
+    for index, (mask, frame_points) in enumerate(zip(frames, points, strict=True)):
+        expected = keep_subject(mask, camera.project(frame_points), camera.pixel_radius(frame_points, SUBJECT_MARGIN_M))
+        np.testing.assert_array_equal(masks[index], expected)
+        kept_pixels += int(expected.sum())
+    assert 0 < kept_pixels < sum(int(mask.sum()) for mask in frames)  # some parts kept, some strays cut
 
 
 @needs_mediapipe

@@ -190,13 +190,16 @@ def refitted_cameras(cameras: Sequence, poses: Sequence[VideoPose], refit: Seque
 
 def restrict_to_subject(video_masks: Sequence[CroppedMasks], cameras: Sequence, targets_m: np.ndarray) -> None:
     """Cut every video mask down to the subject in place (keep_subject): the parts that hold one of
-    the frame's targets (F, T, 3), projected, within SUBJECT_MARGIN_M."""
+    the frame's targets (F, T, 3), projected, within SUBJECT_MARGIN_M. Each mask is cut within its
+    stored crop (a person fills a few per cent of a frame), never rebuilt at the frame's size."""
     for camera, masks in zip(cameras, video_masks, strict=True):
         for frame, points in enumerate(targets_m):
             present = points[np.isfinite(points).all(axis=1)]
-            if len(present):
-                masks[frame] = keep_subject(masks[frame], camera.project(present),
-                                            camera.pixel_radius(present, SUBJECT_MARGIN_M))
+            top, left, crop = masks.crop(frame)
+            if len(present) and crop.size:
+                kept = keep_subject(crop, camera.project(present) - (left, top),
+                                    camera.pixel_radius(present, SUBJECT_MARGIN_M))
+                masks.set_crop(frame, top, left, kept)
 
 
 def resolve_segmenter(requested: str, keypoints_needed: bool) -> str:

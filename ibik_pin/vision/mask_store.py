@@ -59,6 +59,32 @@ class CroppedMasks(Sequence):
     def __setitem__(self, index: int, mask: np.ndarray) -> None:
         self._crops[index] = self._crop(mask)
 
+    def crop(self, index: int) -> tuple[int, int, np.ndarray]:
+        """The mask's bounding-box crop as stored: (top, left, crop); an empty mask gives a 0 x 0 crop.
+        Work on a crop costs a fraction of work on the full frame."""
+        return self._crops[index]
+
+    def set_crop(self, index: int, top: int, left: int, crop: np.ndarray) -> None:
+        """Replace mask `index` by `crop` (bool) placed at (top, left) [px], cut to its own bounding box."""
+        self._crops[index] = self._placed(top, left, crop)
+
+    def append_crop(self, top: int, left: int, crop: np.ndarray) -> None:
+        """Add a mask given as `crop` (bool) placed at (top, left) [px], without building the full frame."""
+        self._crops.append(self._placed(top, left, crop))
+
+    def _placed(self, top: int, left: int, crop: np.ndarray) -> tuple[int, int, np.ndarray]:
+        crop = np.asarray(crop, bool)
+        width, height = self.size
+        if top < 0 or left < 0 or top + crop.shape[0] > height or left + crop.shape[1] > width:
+            raise InputError(f"mask crop: {crop.shape[0]} x {crop.shape[1]} at (top {top}, left {left}) leaves the "
+                             f"{height} x {width} frame")
+        rows = np.flatnonzero(crop.any(axis=1))
+        if rows.size == 0:
+            return 0, 0, np.zeros((0, 0), bool)
+        columns = np.flatnonzero(crop.any(axis=0))
+        return (top + int(rows[0]), left + int(columns[0]),
+                crop[rows[0] : rows[-1] + 1, columns[0] : columns[-1] + 1].copy())
+
     def __iter__(self) -> Iterator[np.ndarray]:
         return (self[index] for index in range(len(self)))
 
