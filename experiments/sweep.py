@@ -33,7 +33,7 @@ from pathlib import Path
 from realdata.runner import DEFAULT_DATA, REPOSITORY, code_revision, parse_settings, tracking_settings, variant
 from sweepkit.conditions import draw_condition, load_condition, write_condition
 from sweepkit.lengths import LENGTHS, image_static, oracle_static, reach_static
-from sweepkit.runs import markdown, run_condition_variant, summarize
+from sweepkit.runs import markdown, paired_markdown, run_condition_variant, summarize
 
 DEFAULTS = {"conditions": 42, "frames": 40, "rate": 30.0, "views": "1,2,4", "silhouettes": "clean,defects"}
 QUICK = {"conditions": 2, "frames": 12, "rate": 30.0, "views": "2", "silhouettes": "clean,defects"}
@@ -66,6 +66,9 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--reach-smoothing", type=int, default=3, metavar="FRAMES",
                         help="frames the targets' reach is averaged over before its bound (trial_lengths; "
                              "default 3)")
+    parser.add_argument("--target-filters", default="off",
+                        help="ibik track --target-filter values, each run on every condition and variant, "
+                             "paired (e.g. off,auto; default off)")
     parser.add_argument("--keep", type=Path, default=None,
                         help="keep each condition's files under this folder, and reuse those already there")
     parser.add_argument("--quick", action="store_true", help="2 conditions of 12 frames, IBIK 2 views (a smoke test)")
@@ -84,6 +87,7 @@ def main(argv: list[str] | None = None) -> dict:
     except Exception as error:  # bad flags: one line, exit code 2
         parser.error(str(error))
     views = [int(v) for v in _list(arguments.views)]
+    target_filters = _list(arguments.target_filters)
     silhouettes = _list(arguments.silhouettes)
 
     def say(text: str) -> None:
@@ -109,35 +113,44 @@ def main(argv: list[str] | None = None) -> dict:
             if inputs is None or inputs.truth.shape[0] != arguments.frames:
                 inputs = write_condition(condition, arguments.data, arguments.frames, arguments.rate, folder,
                                          tuple(silhouettes))
-            static, refinement = None, {}
-            if arguments.lengths in ("reach", "images"):  # PIK's lengths: the targets' only
-                static, refinement["pik"] = reach_static(inputs, arguments.reach_smoothing)
-            elif arguments.lengths == "oracle":
-                static, refinement["pik"] = oracle_static(inputs)
-            conditions.append(dict(inputs.condition.row(), lengths=refinement))
             say(f"condition {index} ({condition.motion}, {condition.size[0]}x{condition.size[1]}, limbs "
                 f"x{condition.body.limb_radius_factor:.2f}, noise {condition.target_noise_mm:.1f} mm, "
                 f"toes {condition.toes}): inputs in {time.perf_counter() - rendering:.1f} s")
-            chosen = [("pik", "clean")] + [(f"ibik{v}v", s) for s in silhouettes for v in views]
-            first_pass = None
-            for name, kind in chosen:
-                run_static = static
-                if arguments.lengths == "images" and name != "pik":
-                    run_static, refinement[f"{name}/{kind}"] = image_static(
-                        inputs, first_pass, int(name[4:-1]), kind, tracking_settings(variant(name), kind, overrides),
-                        arguments.reach_smoothing)
-                result = run_condition_variant(inputs, name, kind, overrides, run_static)
-                first_pass = result.estimate if name == "pik" else first_pass
-                run = result.row()
-                runs.append(run)
-                groups = run["groups_mm"]
-                say(f"  {name:7s} {run['silhouettes']:8s} elbows {groups['elbows']:6.1f}  knees {groups['knees']:6.1f}"
-                    f"  targets {groups['targets']:5.1f} mm ({run['wall_seconds']:.1f} s)")
+            refinement: dict = {}
+            for target_filter in target_filters:  # each filter's runs see its own filtered targets throughout
+                suffix = "" if target_filter == "off" else f"+filter_{target_filter}"
+                static = None
+                if arguments.lengths in ("reach", "images"):  # PIK's lengths: the targets' only
+                    static, refinement["pik" + suffix] = reach_static(inputs, arguments.reach_smoothing,
+                                                                      target_filter)
+                elif arguments.lengths == "oracle":
+                    static, refinement["pik" + suffix] = oracle_static(inputs)
+                chosen = [("pik", "clean")] + [(f"ibik{v}v", s) for s in silhouettes for v in views]
+                first_pass = None
+                for name, kind in chosen:
+                    run_static = static
+                    if arguments.lengths == "images" and name != "pik":
+                        run_static, refinement[f"{name}/{kind}{suffix}"] = image_static(
+                            inputs, first_pass, int(name[4:-1]), kind,
+                            tracking_settings(variant(name), kind, overrides), arguments.reach_smoothing,
+                            target_filter=target_filter)
+                    result = run_condition_variant(inputs, name, kind, overrides, run_static, target_filter)
+                    first_pass = result.estimate if name == "pik" else first_pass
+                    run = dict(result.row(), target_filter=target_filter)
+                    runs.append(run)
+                    groups = run["groups_mm"]
+                    say(f"  {name:7s} {run['silhouettes']:8s} filter {target_filter:4s} elbows "
+                        f"{groups['elbows']:6.1f}  knees {groups['knees']:6.1f}  targets {groups['targets']:5.1f} mm "
+                        f"({run['wall_seconds']:.1f} s)")
+            conditions.append(dict(inputs.condition.row(), lengths=refinement))
         finally:
             if arguments.keep is None:
                 shutil.rmtree(folder, ignore_errors=True)
     wall = time.perf_counter() - started + sum(part["wall_seconds"] for part in parts)
-    summary = summarize(runs)
+    filters = list(dict.fromkeys(run.get("target_filter", "off") for run in runs))
+    summary = summarize(runs) if len(filters) == 1 else {
+        f"target_filter={name}": summarize([run for run in runs if run.get("target_filter", "off") == name])
+        for name in filters}
     command = " ".join(["python experiments/sweep.py", *(sys.argv[1:] if argv is None else argv)])
     header = (f"# Sweep benchmark (`{command}`)\n\n"
               f"{arguments.conditions} conditions (seed {arguments.seed}), {arguments.frames} frames at "
@@ -155,7 +168,10 @@ def main(argv: list[str] | None = None) -> dict:
               "wall_seconds": wall, "summary": summary,
               "conditions": conditions, "runs": runs}
     (arguments.out / "sweep.json").write_text(json.dumps(result, indent=1) + "\n")
-    (arguments.out / "sweep.md").write_text(markdown(summary, header))
+    tables = (markdown(summary, header) if len(filters) == 1 else
+              "\n".join([header, "", paired_markdown(runs, filters)] +
+                         [markdown(part, f"# {key}") for key, part in summary.items()]))
+    (arguments.out / "sweep.md").write_text(tables)
     if not arguments.quiet:
         print((arguments.out / "sweep.md").read_text())
     print(f"tables in {arguments.out / 'sweep.md'}; wall time {wall:.1f} s", flush=True)

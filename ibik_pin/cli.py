@@ -79,6 +79,11 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
                         help="reach: lengthen a limb whose calibrated segments cannot reach its targets on this "
                              "trial (joint centres from markers are not rigid across takes); report.json gives each "
                              "segment's change (default: off)")
+    parser.add_argument("--target-filter", default="off", metavar="auto|off|HZ",
+                        help="low-pass each target keypoint over time (zero-lag 4th-order Butterworth): auto "
+                             "chooses each keypoint's cutoff from the trial's residual analysis, a number is the "
+                             "cutoff in Hz; report.json's target_filter gives the cutoffs and the change "
+                             "(default: off)")
     parser.add_argument("--method", choices=sorted(SOLVERS), default="qp",
                         help="solver scheme (default: qp, the hierarchical QP with joint limits)")
     parser.add_argument("--qp-solver", metavar="NAME",
@@ -154,6 +159,7 @@ def _job(arguments: argparse.Namespace) -> TrackJob:
         model=arguments.model,
         c3d_mapping=arguments.c3d_mapping,
         trial_lengths=arguments.trial_lengths,
+        target_filter=arguments.target_filter,
         person=arguments.person,
         settings=TrackingSettings(method=arguments.method, qp_solver=arguments.qp_solver or DEFAULT_QP_SOLVER,
                                   iterations=arguments.iterations,

@@ -29,6 +29,7 @@ from ibik_pin.subject.trial_lengths import DEFAULT_FACTORS, refine_from_images, 
 from ibik_pin.tasks.image import ImageTask
 from ibik_pin.tasks.silhouette_axis import SilhouetteAxisTask
 from ibik_pin.tracking.settings import TrackingSettings
+from ibik_pin.tracking.target_filter import filter_targets
 from ibik_pin.tracking.views import support_caps
 from ibik_pin.vision.camera import cameras_in_frame
 from sweepkit.conditions import ConditionInputs, _trc, drift_static
@@ -62,12 +63,22 @@ def static_lengths(inputs: ConditionInputs) -> dict[str, float]:
     return segment_lengths_from_keypoints(static.marker_names, static.positions)
 
 
-def reach_static(inputs: ConditionInputs, smoothing_frames: int = 3) -> tuple[Path, dict]:
-    """The static with every limb lengthened as far as the trial's targets need."""
-    lengths = static_lengths(inputs)
+def trial_targets(inputs: ConditionInputs, target_filter: str | float = "off") -> TrcData:
+    """The condition's targets [m], low-passed as ``ibik track --target-filter`` does before it reads them."""
     targets = read_trc(inputs.targets()).in_metres()
+    filtered = filter_targets(targets.marker_names, targets.positions, targets.data_rate, target_filter)
+    targets.positions = filtered.positions
+    return targets
+
+
+def reach_static(inputs: ConditionInputs, smoothing_frames: int = 3,
+                 target_filter: str | float = "off") -> tuple[Path, dict]:
+    """The static with every limb lengthened as far as the trial's targets (filtered so) need."""
+    lengths = static_lengths(inputs)
+    targets = trial_targets(inputs, target_filter)
     refined = refine_from_reach(lengths, targets.marker_names, targets.positions, smoothing_frames=smoothing_frames)
-    return _write_static(inputs, lengths, refined.lengths, "reach"), _report(lengths, refined.lengths)
+    name = "reach" if target_filter == "off" else f"reach_{target_filter}"
+    return _write_static(inputs, lengths, refined.lengths, name), _report(lengths, refined.lengths)
 
 
 def oracle_static(inputs: ConditionInputs) -> tuple[Path, dict]:
@@ -79,17 +90,17 @@ def oracle_static(inputs: ConditionInputs) -> tuple[Path, dict]:
 
 def image_static(inputs: ConditionInputs, estimate: TrcData, views: int, silhouettes: str,
                  settings: TrackingSettings | None = None, smoothing_frames: int = 3,
-                 factors: np.ndarray = LEG_FACTORS) -> tuple[Path, dict]:
+                 factors: np.ndarray = LEG_FACTORS, target_filter: str | float = "off") -> tuple[Path, dict]:
     """The static with the legs' lengths the first `views` cameras' silhouettes prefer around the
     pose `estimate` (a PIK run's joints.trc), the arms' by reach."""
     if views < 2:
-        path, report = reach_static(inputs, smoothing_frames)
+        path, report = reach_static(inputs, smoothing_frames, target_filter)
         return path, dict(report, evidence="one view: the reach only")
     settings = settings or TrackingSettings()
     body = calibrate_static_trial(inputs.static, load_human()).body
     model_lengths = keypoint_lengths(body)
     cameras = cameras_in_frame(read_calibration(inputs.calibration), POSE2SIM_TRC_TO_WORLD)[:views]
-    targets = read_trc(inputs.targets()).in_metres()
+    targets = trial_targets(inputs, target_filter)
     centre = np.nanmean(targets.positions[:, targets.marker_names.index("Hip")], axis=0)
     caps = support_caps(cameras, centre)
     scales = support_caps(cameras, centre, settings.axis_scale)
@@ -120,4 +131,5 @@ def image_static(inputs: ConditionInputs, estimate: TrcData, views: int, silhoue
         refined = legs.lengths[name] if "thigh" in name or "shank" in name else arms.lengths[name]
         wanted[name] = lengths[name] * refined / model_lengths[name]
     report = dict(_report(lengths, wanted), evidence=legs.evidence)
-    return _write_static(inputs, lengths, wanted, f"images{views}v_{silhouettes}"), report
+    suffix = "" if target_filter == "off" else f"_{target_filter}"
+    return _write_static(inputs, lengths, wanted, f"images{views}v_{silhouettes}{suffix}"), report

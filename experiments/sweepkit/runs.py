@@ -60,14 +60,15 @@ class SweepRun:
 
 
 def run_condition_variant(inputs: ConditionInputs, name: str, silhouettes: str, overrides: dict | None = None,
-                          static: Path | None = None) -> SweepRun:
+                          static: Path | None = None, target_filter: str | float = "off") -> SweepRun:
     """``ibik track`` on the condition's files with the variant (IBIK: the first N cameras;
-    realdata.runner.run_variant); `static`: another static file than the condition's."""
+    realdata.runner.run_variant); `static`: another static file than the condition's;
+    `target_filter`: ``--target-filter``."""
     chosen = variant(name)
     scratch = Path(tempfile.mkdtemp(prefix="sweep_"))
     try:
         result = run_variant(dataclasses.replace(inputs, static_path=static), chosen, silhouettes, overrides,
-                             scratch / "run")
+                             scratch / "run", target_filter=target_filter)
         estimate = read_trc(scratch / "run" / "joints.trc").in_metres()
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
@@ -134,4 +135,30 @@ def markdown(summary: dict, header: str) -> str:
             lines.append(f"| {value} | {pik['knees']['count']} | {_cell(pik['elbows'])} | {_cell(clean['elbows'])} | "
                          f"{_cell(defects['elbows'])} | {_cell(pik['knees'])} | {_cell(clean['knees'])} | "
                          f"{_cell(defects['knees'])} |")
+    return "\n".join(lines) + "\n"
+
+
+def paired_markdown(runs: list[dict], filters: list[str]) -> str:
+    """Each target filter against the first, paired by condition, per variant and group: the median
+    and 90th percentile over conditions of each, the median change, and the conditions better or
+    worse by more than 1 mm."""
+    lines = ["## Target filters paired by condition: median / 90th percentile over conditions [mm]", "",
+             "| variant | silhouettes | group | " + " | ".join(filters) +
+             " | median change | better by > 1 mm | worse by > 1 mm (largest) |",
+             "| --- | --- | --- |" + " ---: |" * (len(filters) + 3)]
+    keys = list(dict.fromkeys((r["variant"], r["silhouettes"]) for r in runs))
+    for name, silhouettes in keys:
+        by_filter = {f: {r["index"]: r for r in runs if (r["variant"], r["silhouettes"]) == (name, silhouettes)
+                         and r.get("target_filter", "off") == f} for f in filters}
+        shared = sorted(set.intersection(*(set(rows) for rows in by_filter.values())))
+        if not shared:
+            continue
+        for group in GROUPS:
+            values = {f: [by_filter[f][i]["groups_mm"][group] for i in shared] for f in filters}
+            change = np.subtract(values[filters[-1]], values[filters[0]])
+            worse = change[change > 1.0]
+            lines.append(f"| {variant(name).label} | {silhouettes} | {group} | "
+                         + " | ".join(_cell(_stats(values[f])) for f in filters)
+                         + f" | {np.median(change):+.1f} | {int(np.sum(change < -1.0))} of {len(shared)} | "
+                         + f"{len(worse)} ({np.max(worse) if len(worse) else 0.0:.1f}) |")
     return "\n".join(lines) + "\n"

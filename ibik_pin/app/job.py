@@ -14,10 +14,12 @@ from pathlib import Path
 import numpy as np
 
 from ibik_pin.app.axes import TRC_AXES
+from ibik_pin.app.options import as_options
 from ibik_pin.app.video_people import parse_person
 from ibik_pin.exceptions import InputError, UnknownNameError
 from ibik_pin.solvers import available_qp_solvers
 from ibik_pin.tracking.settings import TrackingSettings
+from ibik_pin.tracking.target_filter import parse_target_filter
 
 # Where the silhouettes of --videos come from (app.video_inputs.resolve_segmenter).
 SEGMENTERS = ("auto", "mediapipe", "mog2")
@@ -55,6 +57,9 @@ class TrackJob:
     number in that rule's ranking (1 the first), or "all" (each into OUT/person_N).
     `trial_lengths` "reach" lengthens a limb whose calibrated segments cannot reach its targets'
     distance on the trial (subject.trial_lengths.refine_from_reach); "off" keeps the calibration's.
+    `target_filter` low-passes each target keypoint over time before anything reads it
+    (tracking.target_filter): "auto" at the cutoff the trial's own residual analysis gives each
+    keypoint, a number at that cutoff [Hz], "off" not at all.
     `targets` and `static` may be C3D files (recognised by content), their markers mapped to
     keypoints by `c3d_mapping` (a TOML mapping file; None: io.c3d's default mapping).
     """
@@ -78,6 +83,7 @@ class TrackJob:
     c3d_mapping: Path | None = None
     trial_lengths: str = "off"
     person: str | int = "auto"
+    target_filter: str | float = "off"
 
     def __post_init__(self) -> None:
         """Paths given as str become Paths; what the CLI refuses, the API refuses too (InputError)."""
@@ -105,6 +111,8 @@ class TrackJob:
             if not isinstance(getattr(self, name), str):
                 raise InputError(f"TrackJob.{name}: expected a name (str), found {getattr(self, name)!r}")
         object.__setattr__(self, "person", parse_person(self.person))
+        with as_options({"target_filter": "--target-filter"}):
+            object.__setattr__(self, "target_filter", parse_target_filter(self.target_filter))
         if self.person != "auto" and self.videos is None:
             raise InputError("--person goes with --videos (the people are found in the videos)")
         if self.masks is not None and self.videos is not None:

@@ -224,6 +224,8 @@ class TrackingReport:
         trial_lengths: with --trial-lengths reach, each limb segment's static and trial length and
             their change [mm], and per limb what decided (subject.trial_lengths.TrialLengths.report);
             None otherwise.
+        target_filter: how --target-filter low-passed the targets, per keypoint the cutoff [Hz] and
+            change [mm] (tracking.target_filter.TargetFilterResult.report); None if not reported.
         diagnosis: what the run judged of its own evidence: suspect views and frames, the figures
             and thresholds (app.diagnosis.Diagnosis); None when not judged (the report of a run
             made outside `ibik track`).
@@ -273,6 +275,7 @@ class TrackingReport:
     triangulation: TriangulationReport | None = None
     extrinsics: ExtrinsicsRefit | None = None
     trial_lengths: dict[str, Any] | None = None
+    target_filter: dict[str, Any] | None = None
     diagnosis: dict[str, Any] | None = None
     people: PeopleReport | None = None
     stage_seconds: dict[str, float] | None = None

@@ -119,6 +119,15 @@ UNITS = {
                                   "change; a limb is only ever lengthened, to reach its targets"),
     "trial_lengths.evidence": ("per limb lengthened, what decided: the reach (98th percentile of the root-to-end "
                                "distance over 3-frame averages) [m], the segments' sum [m] and the factor"),
+    "target_filter": ("how the targets were low-passed over time (--target-filter; zero-lag 4th-order Butterworth): "
+                      "the target_filter.* entries"),
+    "target_filter.mode": "off, auto (each keypoint's cutoff from the trial's residual analysis) or fixed (one cutoff)",
+    "target_filter.frame_rate_hz": "Hz: the targets' frame rate the filter used",
+    "target_filter.median_cutoff_hz": "Hz: the median of the keypoints' cutoffs (null when off)",
+    "target_filter.median_change_rms_mm": "mm: the median over keypoints of the rms distance the filter moved them",
+    "target_filter.keypoints": ("per keypoint: cutoff_hz (null: too few valid frames, left as is), noise_mm (the "
+                                "residual analysis's noise rms per coordinate; null for a fixed cutoff), "
+                                "change_rms_mm and change_max_mm (how far the filter moved it)"),
     "warnings": "every warning the run gave on stderr (IbikWarning), in order, each once",
     "kept_user_files": ("paths in OUTDIR that an earlier output held and ibik did not write (not in its manifest): "
                         "kept beside the new outputs; empty folders end with /"),

@@ -65,6 +65,7 @@ from ibik_pin.subject.scaling import (
     segment_lengths_from_keypoints,
 )
 from ibik_pin.subject.trial_lengths import apply_lengths, refine_from_reach
+from ibik_pin.tracking.target_filter import filter_targets
 from ibik_pin.tracking.tracker import Tracker
 from ibik_pin.vision.camera import cameras_in_frame, select_cameras
 
@@ -282,6 +283,9 @@ def _run_into(staging: Path, job: TrackJob, detected: DetectedPeople | None = No
     if not job.quiet:
         print(f"ibik: TRC axes: {axes.describe()}", file=sys.stderr)
     targets_m = axes.to_model(targets_trc_m)
+    # Target noise goes into the joints as it is: each keypoint low-passed over time, if asked.
+    target_filter = filter_targets(names, targets_m, float(trc.data_rate), job.target_filter)
+    targets_m = target_filter.positions
     if silhouettes is not None and silhouettes.video_masks is not None:
         restrict_to_subject(silhouettes.video_masks, cameras, targets_m)
     diagnosis = Diagnosis()  # the views' evidence judged before any solving (app.diagnosis)
@@ -330,6 +334,7 @@ def _run_into(staging: Path, job: TrackJob, detected: DetectedPeople | None = No
                            triangulation_report=videos.triangulation, extrinsics=videos.extrinsics,
                            trial_lengths=trial_lengths)
     report.diagnosis = diagnosis.to_report()
+    report.target_filter = target_filter.report()
     report.people, report.stage_seconds = videos.people, stages
     report.detection_seconds = videos.detection_seconds or None
     report.end_to_end_seconds = time.perf_counter() - started

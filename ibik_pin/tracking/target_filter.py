@@ -1,0 +1,197 @@
+"""A zero-lag low-pass filter of the targets over time, its cutoff chosen per keypoint from the trial.
+
+Keypoints from motion capture or from triangulated video carry noise from frame to frame, while
+human joints move smoothly: most of the power of joint positions in gait lies below about 6 Hz
+(Winter, Biomechanics and Motor Control of Human Movement, ch. 2). The tracker meets its targets
+exactly at the top priority, so every millimetre of target noise goes into the joints.
+
+The filter is a Butterworth low-pass run forward and backward (scipy.signal.filtfilt: no lag; a
+2nd-order design twice is a 4th-order response, the biomechanics convention and Pose2Sim's default
+filter's order). Its nominal cutoff is corrected for the two passes (Winter: the cutoff of the
+design is the wanted -3 dB frequency over (2^(1/passes) - 1)^(1/(2 order))), so that the reported
+cutoff is the response's.
+
+The cutoff of each keypoint comes from the residual analysis (Winter's): the residual R(fc)
+between the raw and the filtered positions, against the cutoff fc. At high cutoffs only noise is
+left to remove: for white noise of variance s^2 per coordinate, R^2 falls along a straight line,
+s^2 (1 - fc / f_Nyquist); the line fitted there gives the noise's variance at 0 Hz and the noise
+power each hertz of cutoff lets through (minus its slope). Winter takes the cutoff where R meets
+the noise's rms; measured on smooth signals with 2-10 mm of noise at 30 and 120 Hz, that cut real
+motion (3 Hz components) and left the error above the raw targets'. Here the cutoff minimises the
+estimated error instead: the signal removed (R^2 less the noise removed, read off the line) plus
+the noise kept (the line's slope times the cutoff), i.e. the minimum of R^2(fc) - 2 slope fc. A
+fast motion (a punch) keeps R high up to high cutoffs, so its cutoff rises with it; a noise-free
+or already filtered keypoint has a flat noise line, so its cutoff is high and the filter changes it
+by a fraction of a millimetre.
+
+Missing values (NaN) split a keypoint's track into runs of valid frames, each filtered on its own
+(padded by odd reflection, filtfilt's default, up to two periods of the cutoff); runs too short to
+tell motion from noise are left as they are.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.signal import butter, filtfilt
+
+from ibik_pin.exceptions import InputError
+
+__all__ = ["TARGET_FILTER_MODES", "KeypointFilter", "TargetFilterResult", "filter_targets", "lowpass",
+           "parse_target_filter", "residual_curve", "residual_cutoff"]
+
+TARGET_FILTER_MODES = ("off", "auto")
+ORDER = 2  # per pass; forward and backward make a 4th-order zero-lag response
+PASSES = 2
+# The design's cutoff is the response's over this factor (Winter's correction for the passes).
+PASS_CORRECTION = (2.0 ** (1.0 / PASSES) - 1.0) ** (1.0 / (2 * ORDER))
+# Candidate cutoffs span up to this fraction of the Nyquist frequency (the design's own cutoff,
+# corrected, stays below Nyquist); the noise line is fitted over the upper part.
+HIGHEST_CUTOFF = 0.75
+NOISE_LINE_FROM = 0.5
+LOWEST_CUTOFF_HZ = 0.5
+CUTOFF_STEP_HZ = 0.1
+# Shorter runs of valid frames are left unfiltered: too few frames to tell motion from noise.
+MIN_RUN_FRAMES = 8
+
+
+def parse_target_filter(value: str | float | int) -> str | float:
+    """"off", "auto" or a cutoff in Hz (a positive number, or a string of one); InputError otherwise."""
+    if isinstance(value, str):
+        text = value.strip().lower()
+        if text in TARGET_FILTER_MODES:
+            return text
+        try:
+            value = float(text.removesuffix("hz"))
+        except ValueError:
+            raise InputError(f"target_filter: expected off, auto or a cutoff in Hz, found {value!r}",
+                             parameter="target_filter") from None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value <= 0:
+        raise InputError(f"target_filter: expected off, auto or a positive cutoff in Hz, found {value!r}",
+                         parameter="target_filter")
+    return float(value)
+
+
+def _runs(valid: np.ndarray) -> list[tuple[int, int]]:
+    """[start, stop) of each run of True in a 1-D bool array."""
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], valid.astype(np.int8), [0]))))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
+
+
+def lowpass(signal: np.ndarray, rate_hz: float, cutoff_hz: float) -> np.ndarray:
+    """The (F, C) signal filtered at `cutoff_hz` (the zero-lag response's -3 dB point), each run of
+    frames whose C values are all finite on its own; other frames and short runs unchanged."""
+    signal = np.asarray(signal, dtype=float)
+    nyquist = 0.5 * rate_hz
+    design = min(cutoff_hz / PASS_CORRECTION, 0.99 * nyquist)
+    b, a = butter(ORDER, design / nyquist)
+    out = signal.copy()
+    pad_frames = int(np.ceil(2.0 * rate_hz / cutoff_hz))
+    for start, stop in _runs(np.all(np.isfinite(signal), axis=1)):
+        if stop - start >= MIN_RUN_FRAMES:
+            out[start:stop] = filtfilt(b, a, signal[start:stop], axis=0,
+                                       padlen=min(stop - start - 1, max(3 * (ORDER + 1), pad_frames)))
+    return out
+
+
+def candidate_cutoffs(rate_hz: float) -> np.ndarray:
+    """The cutoffs the residual analysis tries at this frame rate [Hz]."""
+    highest = HIGHEST_CUTOFF * 0.5 * rate_hz
+    return np.arange(min(LOWEST_CUTOFF_HZ, highest / 4), highest + 1e-9, min(CUTOFF_STEP_HZ, highest / 40))
+
+
+def residual_curve(signal: np.ndarray, rate_hz: float, cutoffs: np.ndarray) -> np.ndarray:
+    """The rms over frames and coordinates of (raw - filtered) at each cutoff, over the filtered runs."""
+    signal = np.asarray(signal, dtype=float)
+    residuals = np.empty(len(cutoffs))
+    for k, cutoff in enumerate(cutoffs):
+        change = signal - lowpass(signal, rate_hz, float(cutoff))
+        residuals[k] = np.sqrt(np.nanmean(change**2))
+    return residuals
+
+
+def residual_cutoff(signal: np.ndarray, rate_hz: float) -> tuple[float, float]:
+    """(cutoff [Hz], noise rms per coordinate [signal units]) of the residual analysis on the (F, C)
+    signal: the noise line fitted to R^2 at the upper cutoffs; the cutoff that minimises the signal
+    removed plus the noise kept (module docstring)."""
+    cutoffs = candidate_cutoffs(rate_hz)
+    power = residual_curve(signal, rate_hz, cutoffs) ** 2
+    upper = cutoffs >= NOISE_LINE_FROM * 0.5 * rate_hz
+    slope, intercept = np.polyfit(cutoffs[upper], power[upper], 1)
+    slope = min(float(slope), 0.0)  # a rising residual is no noise
+    cutoff = float(cutoffs[np.argmin(power - 2.0 * slope * cutoffs)])
+    return cutoff, float(np.sqrt(max(float(intercept), 0.0)))
+
+
+@dataclass
+class KeypointFilter:
+    """What the filter did to one keypoint: its cutoff [Hz] (None: left unfiltered, too few valid
+    frames), the residual analysis's noise estimate (rms per coordinate; None for a fixed cutoff),
+    and the rms and largest change it made [m]."""
+
+    cutoff_hz: float | None
+    noise_m: float | None
+    change_rms_m: float
+    change_max_m: float
+
+
+@dataclass
+class TargetFilterResult:
+    """The filtered targets and, per keypoint, the cutoff and the change."""
+
+    mode: str
+    rate_hz: float
+    positions: np.ndarray
+    keypoints: dict[str, KeypointFilter] = field(default_factory=dict)
+
+    def report(self) -> dict:
+        """For report.json's `target_filter`: the mode, the rate, per keypoint the cutoff [Hz], the
+        noise estimate and the rms and largest change [mm], and their medians over keypoints."""
+        cutoffs = [k.cutoff_hz for k in self.keypoints.values() if k.cutoff_hz is not None]
+        changes = [k.change_rms_m for k in self.keypoints.values()]
+        return {
+            "mode": self.mode, "frame_rate_hz": self.rate_hz,
+            "median_cutoff_hz": float(np.median(cutoffs)) if cutoffs else None,
+            "median_change_rms_mm": float(np.median(changes) * 1e3) if changes else None,
+            "keypoints": {name: {"cutoff_hz": k.cutoff_hz,
+                                 "noise_mm": None if k.noise_m is None else k.noise_m * 1e3,
+                                 "change_rms_mm": k.change_rms_m * 1e3, "change_max_mm": k.change_max_m * 1e3}
+                          for name, k in self.keypoints.items()},
+        }
+
+
+def filter_targets(names: Sequence[str], positions: np.ndarray, rate_hz: float,
+                   setting: str | float = "auto") -> TargetFilterResult:
+    """The (F, T, 3) targets low-passed over frames per keypoint: "auto" at each keypoint's cutoff
+    from the residual analysis, a number at that cutoff [Hz] (capped below the design's Nyquist
+    limit), "off" unchanged."""
+    setting = parse_target_filter(setting)
+    positions = np.asarray(positions, dtype=float)
+    if positions.ndim != 3 or positions.shape[1] != len(names) or positions.shape[2] != 3:
+        raise InputError(f"positions: expected shape (F, {len(names)}, 3), found {positions.shape}",
+                         parameter="positions")
+    if not (np.isfinite(rate_hz) and rate_hz > 0):
+        raise InputError(f"rate_hz: expected a positive frame rate, found {rate_hz!r}", parameter="rate_hz")
+    mode = setting if isinstance(setting, str) else "fixed"
+    result = TargetFilterResult(mode, float(rate_hz), positions.copy())
+    if setting == "off":
+        return result
+    highest = HIGHEST_CUTOFF * 0.5 * rate_hz
+    for k, name in enumerate(names):
+        track = positions[:, k]
+        runs = _runs(np.all(np.isfinite(track), axis=1))
+        if not any(stop - start >= MIN_RUN_FRAMES for start, stop in runs):
+            result.keypoints[name] = KeypointFilter(None, None, 0.0, 0.0)
+            continue
+        if setting == "auto":
+            cutoff, noise = residual_cutoff(track, rate_hz)
+        else:
+            cutoff, noise = min(float(setting), highest), None
+        filtered = lowpass(track, rate_hz, cutoff)
+        change = np.linalg.norm(filtered - track, axis=1)
+        result.positions[:, k] = filtered
+        result.keypoints[name] = KeypointFilter(cutoff, noise, float(np.sqrt(np.nanmean(change**2))),
+                                                float(np.nanmax(change)))
+    return result
