@@ -18,6 +18,8 @@ of `ibik track`).
 Usage:
     python experiments/real_mocap.py --out out/real_mocap            # the full benchmark
     python experiments/real_mocap.py --quick --set criterion=two-way  # about a minute
+    python experiments/real_mocap.py --quick --target-filters off,auto  # both in one process, paired:
+                                                                        # <out>/filter_<value>/ each
 """
 
 from __future__ import annotations
@@ -85,6 +87,9 @@ def main() -> None:
                         help="override a TrackingSettings field for every variant (repeatable)")
     parser.add_argument("--drop-targets", default="", metavar="NAMES",
                         help="comma-separated target keypoints to leave out, e.g. LBigToe,RBigToe")
+    parser.add_argument("--target-filters", default="off", metavar="VALUES",
+                        help="ibik track --target-filter values, comma-separated (default off); with several, "
+                             "each one's tables and runs go to <out>/filter_<value>/")
     parser.add_argument("--quick", action="store_true",
                         help="40 frames, cmu35_01 and boxing_a, IK, PIK and IBIK 2v (explicit flags win)")
     parser.add_argument("--quiet", action="store_true", help="print only the tables' path and the wall time")
@@ -109,8 +114,10 @@ def main() -> None:
             raise
         parser.error(str(error))
     cache = arguments.cache or arguments.out.parent / "real_mocap_cache"
-    out = arguments.out
-    (out / "previews").mkdir(parents=True, exist_ok=True)
+    target_filters = _list(arguments.target_filters)
+    outs = {f: arguments.out if len(target_filters) == 1 else arguments.out / f"filter_{f}" for f in target_filters}
+    for out in outs.values():
+        (out / "previews").mkdir(parents=True, exist_ok=True)
 
     def say(text: str) -> None:
         if not arguments.quiet:
@@ -118,27 +125,38 @@ def main() -> None:
 
     revision = code_revision()  # the code this process loads now
     started = time.perf_counter()
-    results = []
-    total = len(clips) * len(conditions) * len(variants)
+    results: dict[str, list] = {f: [] for f in target_filters}
+    total = len(clips) * len(conditions) * len(variants) * len(target_filters)
     count = 0
     for clip in clips:
         rendering = time.perf_counter()
         inputs = prepare_inputs(CLIPS[clip], arguments.data, arguments.frames, cache)
-        shutil.copyfile(inputs.preview, out / "previews" / f"{clip}.png")
+        for out in outs.values():
+            shutil.copyfile(inputs.preview, out / "previews" / f"{clip}.png")
         say(f"{clip}: inputs in {inputs.folder} ({time.perf_counter() - rendering:.1f} s)")
         for condition in conditions:
             for chosen in variants:
-                count += 1
-                result = run_variant(inputs, chosen, condition, overrides,
-                                     out / "runs" / clip / condition / chosen.name, drop_targets)
-                results.append(result)
-                errors = result.joint_errors_mm
-                residual = sum(result.residuals_mm.values()) / len(result.residuals_mm)
-                say(f"[{count}/{total}] {clip} {condition} {chosen.label}: "
-                    + " ".join(f"{joint} {value:.1f}" for joint, value in errors.items())
-                    + f" mm, judged {result.judged_mm:.1f} mm, target residual {residual:.1f} mm "
-                    f"({result.wall_seconds:.1f} s)")
+                for target_filter in target_filters:  # the filters side by side: paired on this machine's state
+                    count += 1
+                    result = run_variant(inputs, chosen, condition, overrides,
+                                         outs[target_filter] / "runs" / clip / condition / chosen.name, drop_targets,
+                                         target_filter=target_filter)
+                    results[target_filter].append(result)
+                    errors = result.joint_errors_mm
+                    residual = sum(result.residuals_mm.values()) / len(result.residuals_mm)
+                    say(f"[{count}/{total}] {clip} {condition} {chosen.label} filter {target_filter}: "
+                        + " ".join(f"{joint} {value:.1f}" for joint, value in errors.items())
+                        + f" mm, judged {result.judged_mm:.1f} mm, target residual {residual:.1f} mm "
+                        f"({result.wall_seconds:.1f} s)")
     wall = time.perf_counter() - started
+    for target_filter, out in outs.items():
+        _write_tables(out, arguments, results[target_filter], overrides, clips, conditions, variants,
+                      drop_targets, target_filter, wall, revision)
+
+
+def _write_tables(out: Path, arguments: argparse.Namespace, results: list, overrides: dict, clips: list[str],
+                  conditions: list[str], variants: list, drop_targets: list[str], target_filter: str, wall: float,
+                  revision: str) -> None:
     summary = summarize(results)
     settings = {condition: {v.name: dataclasses.asdict(tracking_settings(v, condition, overrides)) for v in variants}
                 for condition in conditions}
@@ -153,12 +171,14 @@ def main() -> None:
               f"\"defects\": Section 4's silhouette defects and 5 mm of target noise, IBIK voting masks over "
               f"3 frames. Every run is `ibik track` (run_track) on the written files.\n\n"
               f"{len(clips)} clips, {arguments.frames} frames each at {RATE_HZ:g} Hz: {windows}. "
-              f"Settings overridden: {overrides or 'none'}; targets left out: {', '.join(drop_targets) or 'none'}. "
+              f"Settings overridden: {overrides or 'none'}; targets left out: {', '.join(drop_targets) or 'none'}; "
+              f"--target-filter {target_filter}. "
               f"Total wall time {wall:.0f} s on {platform.node()} ({len(results)} runs); code at {revision}.")
     (out / "real_mocap.md").write_text(markdown(results, summary, header))
     (out / "real_mocap.json").write_text(json.dumps({
         "command": command, "revision": revision, "clips": {name: dataclasses.asdict(CLIPS[name]) for name in clips},
         "frames": arguments.frames, "rate_hz": RATE_HZ, "overrides": overrides, "drop_targets": drop_targets,
+        "target_filter": target_filter,
         "settings": settings,
         "wall_seconds": wall, "summary": summary, "runs": [r.row() for r in results],
     }, indent=2) + "\n")

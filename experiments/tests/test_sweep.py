@@ -57,6 +57,20 @@ def test_a_quick_sweep_writes_every_figure(tmp_path):
 
 
 @needs_data
+def test_target_filters_run_paired_on_the_same_condition(tmp_path):
+    result = sweep.main(["--quick", "--conditions", "1", "--silhouettes", "clean", "--target-filters", "off,auto",
+                         "--out", str(tmp_path), "--quiet"])
+    runs = {(run["variant"], run["target_filter"]): run for run in result["runs"]}
+    assert set(runs) == {(v, f) for v in ("pik", "ibik2v") for f in ("off", "auto")}
+    assert set(result["summary"]) == {"target_filter=off", "target_filter=auto"}
+    # Condition 0 draws 9.3 mm of target noise: the filtered targets lie closer to the mocap joints.
+    for name in ("pik", "ibik2v"):
+        assert runs[(name, "auto")]["groups_mm"]["targets"] < runs[(name, "off")]["groups_mm"]["targets"] - 2.0
+    table = (tmp_path / "sweep.md").read_text()
+    assert "Target filters paired by condition" in table and "| IBIK 2v | clean | targets |" in table
+
+
+@needs_data
 def test_the_silhouette_body_widens_flattens_and_loosens_as_drawn():
     from realdata.clips import load_clip
     from sweepkit.body import BodyShape, SweepBody
