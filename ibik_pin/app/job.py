@@ -23,8 +23,9 @@ from ibik_pin.tracking.target_filter import parse_target_filter
 
 # Where the silhouettes of --videos come from (app.video_inputs.resolve_segmenter).
 SEGMENTERS = ("auto", "mediapipe", "mog2")
-# How the limb lengths are refined on the trial itself (subject.trial_lengths): not, or by the targets' reach.
-TRIAL_LENGTHS = ("off", "reach")
+# How the limb lengths are refined on the trial itself (subject.trial_lengths): not, by the targets' reach,
+# or the legs on the silhouettes (app.trial_lengths_images).
+TRIAL_LENGTHS = ("off", "reach", "images")
 # Bounds that keep a run finite: at 1000 steps a frame already takes seconds, and a majority vote
 # over more than 61 frames (a second at 60 Hz) is no longer a filter of flicker.
 MAX_ITERATIONS = 1000
@@ -56,7 +57,9 @@ class TrackJob:
     `person` is whom to follow in the videos: "auto" (app.video_people.PERSON_RULE), a person's
     number in that rule's ranking (1 the first), or "all" (each into OUT/person_N).
     `trial_lengths` "reach" lengthens a limb whose calibrated segments cannot reach its targets'
-    distance on the trial (subject.trial_lengths.refine_from_reach); "off" keeps the calibration's.
+    distance on the trial (subject.trial_lengths.refine_from_reach); "images" chooses each leg's
+    length on the silhouettes of two views or more, the arms' by reach (app.trial_lengths_images);
+    "off" keeps the calibration's.
     `target_filter` low-passes each target keypoint over time before anything reads it
     (tracking.target_filter): "auto" at the cutoff the trial's own residual analysis gives each
     keypoint, a number at that cutoff [Hz], "off" not at all.

@@ -114,11 +114,13 @@ UNITS = {
     "solver_levels": "per level of the priority stack, what it got at each frame (solver_levels.* entries)",
     "solver_levels.stack": "where the stack came from: default, or the stack file",
     "solver_levels.levels": "the stack's levels, highest priority first",
-    "trial_lengths": "null unless --trial-lengths reach; otherwise the trial_lengths.* entries",
+    "trial_lengths": "null unless --trial-lengths reach or images; otherwise the trial_lengths.* entries",
     "trial_lengths.segments_mm": ("mm: per limb segment, its static (calibrated) length, its trial length and the "
-                                  "change; a limb is only ever lengthened, to reach its targets"),
-    "trial_lengths.evidence": ("per limb lengthened, what decided: the reach (98th percentile of the root-to-end "
-                               "distance over 3-frame averages) [m], the segments' sum [m] and the factor"),
+                                  "change; reach only ever lengthens a limb, to reach its targets; images may "
+                                  "shorten a leg"),
+    "trial_lengths.evidence": ("per limb, what decided: the reach (98th percentile of the root-to-end distance over "
+                               "3-frame averages) [m], the segments' sum [m] and the factor; or the images (frames, "
+                               "the factors chosen, the gain over the calibrated lengths)"),
     "target_filter": ("how the targets were low-passed over time (--target-filter; zero-lag 4th-order Butterworth): "
                       "the target_filter.* entries"),
     "target_filter.mode": "off, auto (each keypoint's cutoff from the trial's residual analysis) or fixed (one cutoff)",

@@ -47,6 +47,7 @@ from ibik_pin.app.outdir import check_outdir, kept_message, make_staging, overla
 from ibik_pin.app.outputs import write_outputs
 from ibik_pin.app.report import TrackingReport
 from ibik_pin.app.silhouette_files import camera_folder_entries, load_silhouettes
+from ibik_pin.app.trial_lengths_images import refine_lengths_on_images
 from ibik_pin.app.video_inputs import SilhouetteQualityReader, detect_videos_people, read_videos, restrict_to_subject
 from ibik_pin.app.video_people import DetectedPeople
 from ibik_pin.exceptions import FileFormatError, IbikWarning, InputError, UnreconciledViewsError
@@ -300,7 +301,14 @@ def _run_into(staging: Path, job: TrackJob, detected: DetectedPeople | None = No
     calibration_started = time.perf_counter()
     body = prepare_body(job, names, targets_m, calibrate_on_targets=videos.triangulation is not None)
     trial_lengths = None
-    if job.trial_lengths == "reach":  # a static take's joint centres are not rigid across takes
+    if job.trial_lengths == "images" and silhouettes is not None and settings.use_image:
+        kept = [k for k, name in enumerate(names) if name not in videos.left_to_image]
+        frames = np.flatnonzero(~jumps.dropped)
+        frame_masks = silhouettes.frame
+        trial_lengths = refine_lengths_on_images(body, [names[k] for k in kept], targets_m[frames][:, kept], cameras,
+                                                 lambda index: frame_masks(int(frames[index])), settings)
+        body = apply_lengths(body, trial_lengths)
+    elif job.trial_lengths != "off":  # a static take's joint centres are not rigid across takes
         trial_lengths = refine_from_reach(keypoint_lengths(body), names, targets_m)
         body = apply_lengths(body, trial_lengths)
     stages["calibration"] = time.perf_counter() - calibration_started

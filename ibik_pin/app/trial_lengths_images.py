@@ -1,0 +1,72 @@
+"""`--trial-lengths images`: the legs' lengths chosen on the trial's silhouettes, the arms' by reach.
+
+A first pass without the image (PIK) puts every frame's limb ends on their targets; around that
+pose, subject.trial_lengths.refine_from_images tries one factor per leg on both its segments (the
+silhouettes tell a leg's length, not its split between thigh and shank: docs/sweep.md) and keeps
+the one whose knees, each at its best swivel, explain the views best. The arms go by the targets'
+reach (an arm hanging against the trunk is not told apart from it by the silhouettes). One view
+sees no depth: with fewer than two cameras the legs too go by reach. This is what the sweep's
+`--lengths images` does (experiments/sweepkit/lengths.py), inside `ibik track`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import replace
+
+import numpy as np
+
+from ibik_pin.model import BodyModel
+from ibik_pin.readahead.frame_images import frame_images
+from ibik_pin.subject.scaling import keypoint_lengths
+from ibik_pin.subject.trial_lengths import TrialLengths, refine_from_images, refine_from_reach
+from ibik_pin.tasks.image import ImageTask
+from ibik_pin.tasks.silhouette_axis import SilhouetteAxisTask
+from ibik_pin.tracking.settings import TrackingSettings
+from ibik_pin.tracking.tracker import Tracker
+from ibik_pin.tracking.views import support_caps
+
+__all__ = ["refine_lengths_on_images"]
+
+LEGS = ("left_leg", "right_leg")
+ARMS = ("left_arm", "right_arm")
+
+
+def refine_lengths_on_images(body: BodyModel, names: list[str], targets_m: np.ndarray, cameras: Sequence,
+                             masks_of_frame: Callable[[int], Sequence[np.ndarray]],
+                             settings: TrackingSettings) -> TrialLengths:
+    """The calibrated body's limb lengths refined on this trial: legs on the silhouettes around a
+    blind first pass (two views or more), arms (and legs with one view) by the targets' reach.
+
+    Args:
+        targets_m: (F, T, 3) the targets in the model's frame [m]; NaN where absent.
+        masks_of_frame: frame index -> one silhouette per camera (as the tracker reads them).
+        settings: the run's; the first pass drops the image, the criteria take its weights.
+    """
+    lengths = keypoint_lengths(body)
+    if len(cameras) < 2:
+        return refine_from_reach(lengths, names, targets_m)
+    first_pass = Tracker(body, [], replace(settings, use_image=False)).track(names, targets_m)
+    centre = np.nanmean(targets_m.reshape(-1, 3), axis=0)
+    caps = support_caps(cameras, centre)
+    scales = support_caps(cameras, centre, settings.axis_scale)
+    image_task = ImageTask(body, samples_per_segment=settings.samples_per_segment)
+    axis_task = SilhouetteAxisTask(body)
+
+    def frames() -> Iterator:
+        for frame in range(first_pass.keypoints.shape[0]):
+            if not np.all(np.isfinite(first_pass.keypoints[frame])):
+                continue
+            images = frame_images(masks_of_frame, cameras, caps, scales, frame)
+            image_task.set_views(images.views)
+            axis_task.set_views(images.axis_views or [])
+            keypoints = {name: first_pass.keypoints[frame, k] for k, name in enumerate(first_pass.keypoint_names)}
+            yield keypoints, [(image_task, 1.0), (axis_task, settings.axis_weight)]
+
+    legs = refine_from_images(body, lengths, frames(), limbs=LEGS, keep_ratio=True)
+    arms = refine_from_reach(lengths, names, targets_m, limbs=ARMS)
+    refined = dict(lengths)
+    for limb_lengths in (legs, arms):
+        refined.update({name: value for name, value in limb_lengths.lengths.items()
+                        if value != lengths[name]})
+    return TrialLengths(refined, dict(lengths), {**legs.evidence, **arms.evidence})
