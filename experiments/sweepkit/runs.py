@@ -161,4 +161,18 @@ def paired_markdown(runs: list[dict], filters: list[str]) -> str:
                          + " | ".join(_cell(_stats(values[f])) for f in filters)
                          + f" | {np.median(change):+.1f} | {int(np.sum(change < -1.0))} of {len(shared)} | "
                          + f"{len(worse)} ({np.max(worse) if len(worse) else 0.0:.1f}) |")
+    lines += ["", f"## Per motion, {filters[0]} -> {filters[-1]}: median over the motion's conditions [mm]", "",
+              "| motion | variant | silhouettes | conditions | elbows | knees | targets |", "| --- | --- | --- |"
+              + " ---: |" * 4]
+    for motion in dict.fromkeys(r["motion"] for r in runs):
+        for name, silhouettes in keys:
+            chosen = [r for r in runs if (r["motion"], r["variant"], r["silhouettes"]) == (motion, name, silhouettes)]
+            first = [r for r in chosen if r.get("target_filter", "off") == filters[0]]
+            last = [r for r in chosen if r.get("target_filter", "off") == filters[-1]]
+            if not first or not last:
+                continue
+            cells = [f"{np.median([r['groups_mm'][g] for r in first]):.1f} -> "
+                     f"{np.median([r['groups_mm'][g] for r in last]):.1f}" for g in GROUPS]
+            lines.append(f"| {motion} | {variant(name).label} | {silhouettes} | {len(first)} | " + " | ".join(cells)
+                         + " |")
     return "\n".join(lines) + "\n"
