@@ -8,7 +8,7 @@ from ibik_pin.exceptions import InputError
 from ibik_pin.tasks import ImageTask, View
 from ibik_pin.tasks.segments import SegmentCriterion
 from ibik_pin.tasks.silhouette_axis import AxisView, SilhouetteAxisTask
-from ibik_pin.tracking.swivel import SwivelSearch, inside_trunk, swivel_circle
+from ibik_pin.tracking.swivel import SwivelSearch, inside_trunk, outside_counts, swivel_circle, trunk_distance
 from ibik_pin.vision.medial_axis import medial_axis_pixels
 from ibik_pin.vision.pinhole import look_at_camera
 from ibik_pin.vision.render import render_capsules
@@ -328,3 +328,82 @@ def test_an_elbow_laid_into_the_trunk_is_hinted_out_even_where_every_term_prefer
     nearest = outside[np.argmin(np.linalg.norm(outside - elbow, axis=1))]
     assert np.linalg.norm(hints["LElbow"] - nearest) < 0.02
     assert SwivelSearch(human, [(staying, 1.0)], trunk_section=None).hints(configuration, ["LElbow"]) == {}
+
+
+def test_a_third_semi_axis_gives_the_trunk_section_its_own_front():
+    hip, neck = np.zeros(3), np.array([0.0, 0.5, 0.0])
+    left, right = np.array([0.0, 0.35, -0.19]), np.array([0.0, 0.35, 0.19])  # facing +x, Y up
+    # One half shoulder width (0.19 m) in front of the axis near the middle, and as far behind.
+    in_front, behind = np.array([0.19, 0.2, -0.03]), np.array([-0.19, 0.2, -0.03])
+    section = (0.75, 1.2, 0.6)
+    assert inside_trunk(in_front, hip, neck, left, right, section)
+    assert not inside_trunk(behind, hip, neck, left, right, section)
+    assert not inside_trunk(in_front, hip, neck, left, right)  # the default pair: 0.6 both ways
+    distance, along = trunk_distance(np.stack([in_front, behind]), hip, neck, left, right, section)
+    sideways = 0.03 / (0.75 * 0.19)
+    np.testing.assert_allclose(distance, [np.hypot(sideways, 1 / 1.2), np.hypot(sideways, 1 / 0.6)], rtol=1e-12)
+    np.testing.assert_allclose(along, [0.4, 0.4], rtol=1e-12)
+
+
+def test_outside_counts_count_each_segments_points_outside():
+    roots, ends = np.array([[0.0, 0.0, 0.0]]), np.array([[0.0, -0.6, 0.0]])
+    middles = np.array([[[0.2, -0.3, 0.0], [-0.2, -0.3, 0.0]]])  # two candidates of one limb
+
+    def left_of_x(points):  # a silhouette: the half-space x < 0.1
+        return points[:, 0] < 0.1
+
+    counts = outside_counts(left_of_x, roots, middles, ends, samples=4)
+    # Candidate 0: on each segment the points at x = 0.025, 0.075, 0.125, 0.175 -> two outside each.
+    np.testing.assert_array_equal(counts, [[4, 0]])
+    np.testing.assert_array_equal(outside_counts(left_of_x, roots, middles[:, 0], ends, samples=4), [4])
+
+
+def _arm_beside_the_trunk(human):
+    import pinocchio as pin
+
+    q = pin.neutral(human.model)
+    for joint, angle in [("left_shoulder_X", 0.3), ("left_elbow_Z", 1.3)]:
+        q[human.model.joints[human.model.getJointId(joint)].idx_q] = angle
+    configuration = Configuration(human.model, q)
+    shoulder, elbow, wrist = configuration.frame_positions(human.frame_ids(["LShoulder", "LElbow", "LWrist"]))
+    trunk = configuration.frame_positions(human.frame_ids(["Hip", "Neck", "LShoulder", "RShoulder"]))
+    circle = swivel_circle(shoulder, elbow, wrist, 72)
+    distance, _ = trunk_distance(circle, *trunk)
+    nearest_trunk = circle[np.argmin(np.where(inside_trunk(circle, *trunk), np.inf, distance))]
+    return configuration, (shoulder, elbow, wrist), trunk, nearest_trunk
+
+
+def test_an_elbow_the_silhouettes_do_not_refute_is_not_hinted_toward_the_trunk(human):
+    """Two views' silhouettes cover an arm laid over the trunk as well as one beside it: a criterion
+    that prefers the trunk is no evidence while the arm where it is lies inside them."""
+    configuration, (_, elbow, _), trunk, nearest_trunk = _arm_beside_the_trunk(human)
+    assert trunk_distance(nearest_trunk, *trunk)[0] < trunk_distance(elbow, *trunk)[0] - 0.3
+    pulling = [(_Towards(human, nearest_trunk), 1.0)]
+
+    def everywhere(points):
+        return np.ones(len(points), dtype=bool)
+
+    assert SwivelSearch(human, pulling, inside_silhouettes=everywhere).hints(configuration, ["LElbow"]) == {}
+    earlier = SwivelSearch(human, pulling, inside_silhouettes=everywhere, keep_unrefuted=False)
+    assert np.linalg.norm(earlier.hints(configuration, ["LElbow"])["LElbow"] - nearest_trunk) < 0.01
+
+
+def test_a_refuted_elbow_is_hinted_to_the_nearest_swivel_the_silhouettes_allow(human):
+    configuration, (shoulder, elbow, wrist), _, nearest_trunk = _arm_beside_the_trunk(human)
+    axis = (wrist - shoulder) / np.linalg.norm(wrist - shoulder)
+    centre = shoulder + ((elbow - shoulder) @ axis) * axis
+    radius = np.linalg.norm(elbow - centre)
+    outward = (elbow - centre) / radius
+
+    def short_of_the_elbow(points):  # a silhouette that ends short of the elbow, 0.8 of the radius out
+        return (points - centre) @ outward < 0.8 * radius
+
+    pulling = [(_Towards(human, nearest_trunk), 1.0)]
+    search = SwivelSearch(human, pulling, inside_silhouettes=short_of_the_elbow)
+    hint = search.hints(configuration, ["LElbow"])["LElbow"]
+    assert outside_counts(short_of_the_elbow, shoulder[None], hint[None], wrist[None])[0] == 0
+    # The least swivel that clears it: the arm's outermost points (11/12 of each segment) inside
+    # once cos(swivel) < 0.8 / (11/12), 29 degrees (a chord of 0.5 radius); the samples are 10
+    # degrees apart, then refined. The criterion's peak, nearer the trunk, is not taken.
+    assert 0.45 * radius < np.linalg.norm(hint - elbow) < 0.65 * radius
+    assert np.linalg.norm(hint - nearest_trunk) > 0.3 * radius

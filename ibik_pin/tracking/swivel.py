@@ -32,9 +32,11 @@ from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.tasks.segments import SegmentCriterion
+from ibik_pin.tracking.trunk import TRUNK_KEYPOINTS, TRUNK_SECTION, inside_trunk, trunk_distance
 from ibik_pin.tracking.views import LIMB_HALF_WIDTH
 
-__all__ = ["LIMB_ENDS", "TRUNK_SECTION", "SwivelSearch", "inside_trunk", "swivel_circle", "views_cross"]
+__all__ = ["LIMB_ENDS", "TRUNK_SECTION", "SwivelSearch", "inside_trunk", "outside_counts", "swivel_circle",
+           "trunk_distance", "views_cross"]
 
 #: Middle joint -> the two limb ends it swivels between.
 LIMB_ENDS: dict[str, tuple[str, str]] = {
@@ -43,42 +45,6 @@ LIMB_ENDS: dict[str, tuple[str, str]] = {
     "LKnee": ("LHip", "LAnkle"),
     "RKnee": ("RHip", "RAnkle"),
 }
-
-
-#: Keypoints that place the trunk: its axis from the pelvis centre to the neck, its width from the
-#: shoulders (inside_trunk).
-TRUNK_KEYPOINTS = ("Hip", "Neck", "LShoulder", "RShoulder")
-#: Semi-axes of the trunk's cross-section an elbow's centre never enters, sideways and front to back,
-#: in half shoulder widths (between the shoulder joint centres). A trunk's half width at the waist is
-#: about 0.75-0.85 of that and its half depth 0.55-0.7, and an elbow's centre keeps an arm's radius
-#: (another 0.2) outside the skin. Measured on the sweep's 14 motions (1120 frames of each elbow,
-#: docs/sweep.md): no true elbow inside this section; 24 of the 156 frames whose IBIK elbow was more
-#: than 40 mm off were inside (an arm laid into the trunk, where both views' silhouettes cover it).
-TRUNK_SECTION = (0.75, 0.6)
-
-
-def inside_trunk(points: np.ndarray, hip: np.ndarray, neck: np.ndarray, left_shoulder: np.ndarray,
-                 right_shoulder: np.ndarray, section: tuple[float, float] = TRUNK_SECTION) -> np.ndarray:
-    """Whether points (..., 3) [m] lie inside the trunk: an elliptic cylinder about the line from the
-    pelvis centre `hip` to `neck`, between those two heights, of semi-axes `section` (sideways,
-    front to back) in half shoulder widths."""
-    points = np.asarray(points, dtype=float)
-    up = neck - hip
-    height = float(np.linalg.norm(up))
-    half_width = 0.5 * float(np.linalg.norm(left_shoulder - right_shoulder))
-    if height < 1e-9 or half_width < 1e-9:
-        return np.zeros(points.shape[:-1], dtype=bool)
-    up = up / height
-    sideways = (left_shoulder - right_shoulder) - ((left_shoulder - right_shoulder) @ up) * up
-    if np.linalg.norm(sideways) < 1e-9:
-        return np.zeros(points.shape[:-1], dtype=bool)
-    sideways = sideways / np.linalg.norm(sideways)
-    forward = np.cross(up, sideways)
-    offset = points - hip
-    along = offset @ up
-    across = (offset @ sideways) / (section[0] * half_width)
-    depth = (offset @ forward) / (section[1] * half_width)
-    return (along > 0.0) & (along < height) & (across**2 + depth**2 < 1.0)
 
 
 def views_cross(cameras: Sequence, min_angle_deg: float = 45.0) -> bool:
@@ -155,6 +121,29 @@ def swivel_circle(root: np.ndarray, middle: np.ndarray, end: np.ndarray, count: 
     return circles[0] if single else circles
 
 
+#: Points sampled on each of a limb's two segments to count where it leaves the silhouettes.
+REFUTE_SAMPLES = 6
+
+
+def outside_counts(inside_silhouettes: Callable[[np.ndarray], np.ndarray], roots: np.ndarray,
+                   middles: np.ndarray, ends: np.ndarray, samples: int = REFUTE_SAMPLES) -> np.ndarray:
+    """How many of a limb's points lie outside the silhouettes (in some view), for limbs (L, 3)
+    with their middle joints at `middles` (L, 3) or at candidates (L, C, 3): shape (L,) or (L, C).
+    The points: `samples` on each segment, root-middle and middle-end, at the centres of equal parts."""
+    middles = np.asarray(middles, dtype=float)
+    single = middles.ndim == 2
+    placed = middles[:, None] if single else middles
+    fractions = (np.arange(samples) + 0.5) / samples
+    root = np.broadcast_to(roots[:, None, None], (*placed.shape[:2], 1, 3))
+    end = np.broadcast_to(ends[:, None, None], (*placed.shape[:2], 1, 3))
+    middle = placed[:, :, None]
+    points = np.concatenate([root + fractions[:, None] * (middle - root),
+                             middle + fractions[:, None] * (end - middle)], axis=2)  # (L, C, 2 samples, 3)
+    outside = ~inside_silhouettes(points.reshape(-1, 3)).reshape(points.shape[:3])
+    counts = outside.sum(axis=2)
+    return counts[:, 0] if single else counts
+
+
 def _distances_to_lines(points: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
     """Distances [m] of points (L, 3) to the lines through starts and ends (L, 3) (to the start
     where the two coincide), shape (L,)."""
@@ -205,6 +194,14 @@ class SwivelSearch:
             and one that the solve left there is hinted to the best swivel outside it whatever the
             terms say: with two views the silhouettes cover the trunk's whole volume, so the image
             criterion scores an arm laid into the trunk as well as the true one. None: no trunk.
+        keep_unrefuted: an elbow whose best sample lies nearer the trunk's axis (trunk_distance) than
+            the elbow is hinted only as far as the silhouettes ask: to the nearest sample with the
+            fewest points of the arm outside them (outside_counts), none if that is where it is.
+            A silhouette says where the body is not, never where within itself a limb lies, and the
+            support, capped at a limb's half width, is deeper over the trunk than over a thin arm:
+            so the criterion prefers an arm laid over or in front of the trunk wherever both views
+            see it there. On jumps (2 views, clean) such hints put right elbows 50 mm off on
+            average where the prior's were 16-18 (docs/sweep.md, "Elbows the image made worse").
     """
 
     body: BodyModel
@@ -215,7 +212,8 @@ class SwivelSearch:
     min_radius: float = 2.0 * LIMB_HALF_WIDTH
     inside_silhouettes: Callable[[np.ndarray], np.ndarray] | None = None
     refine: int = 4
-    trunk_section: tuple[float, float] | None = TRUNK_SECTION
+    trunk_section: tuple[float, ...] | None = TRUNK_SECTION
+    keep_unrefuted: bool = True
 
     def __post_init__(self) -> None:
         if int(self.samples) < 3:
@@ -236,6 +234,33 @@ class SwivelSearch:
             hip, neck, left_shoulder, right_shoulder = configuration.frame_positions(self._trunk_ids)
             inside[elbows] = inside_trunk(points[elbows], hip, neck, left_shoulder, right_shoulder, self.trunk_section)
         return inside
+
+    def _towards_trunk(self, configuration: Configuration, elbows: np.ndarray, middles: np.ndarray,
+                       picked: np.ndarray) -> np.ndarray:
+        """Which of the flagged elbows (L,) would the best sample `picked` (L, 3) take nearer the
+        trunk's axis than where it is (middles (L, 3)), with keep_unrefuted."""
+        towards = np.zeros(len(elbows), dtype=bool)
+        if not self.keep_unrefuted or self.inside_silhouettes is None or self._trunk_ids is None or not elbows.any():
+            return towards
+        distance, _ = trunk_distance(np.stack([middles[elbows], picked[elbows]], axis=1),
+                                     *configuration.frame_positions(self._trunk_ids))
+        towards[elbows] = distance[:, 1] < distance[:, 0]
+        return towards
+
+    def _least_refuted(self, roots: np.ndarray, circles: np.ndarray, ends: np.ndarray,
+                       forbidden: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """For limbs (L, 3) whose candidates are `circles` (L, C, 3), sample 0 where the joint is: the
+        candidate nearest the joint among those with the fewest points outside the silhouettes
+        (outside_counts), not `forbidden` (L, C), and whether it is a hint (fewer than where the joint
+        is): the index (L,) and (L,) bool."""
+        if self.inside_silhouettes is None:
+            raise InputError("the swivel search needs inside_silhouettes to count a limb's points outside them")
+        counts = np.where(forbidden, np.iinfo(np.int64).max,
+                          outside_counts(self.inside_silhouettes, roots, circles, ends)).astype(np.int64)
+        fewest = counts.min(axis=1)
+        distance = np.linalg.norm(circles - circles[:, :1], axis=2)
+        nearest = np.argmin(np.where(counts == fewest[:, None], distance, np.inf), axis=1)
+        return nearest, fewest < counts[:, 0]
 
     def _limb_frame_ids(self, name: str) -> np.ndarray:
         """The frames of a limb's root, middle joint and end, shape (3,) (looked up once)."""
@@ -341,5 +366,12 @@ class SwivelSearch:
         gained = at_best - values[:, 0] > self.min_gain * spread
         # Sample 0 is where the joint is: an elbow inside the trunk leaves it whatever the terms say.
         trapped = forbidden[:, 0]
-        hinted = possible & ((agreed & (spread > 0.0) & gained) | trapped) & (moved > self.min_distance)
+        hinted = possible & ((agreed & (spread > 0.0) & gained) | trapped)
+        towards = self._towards_trunk(configuration, elbows & hinted & ~trapped, middles[chosen],
+                                      circles[np.arange(chosen.size), best])
+        if towards.any():
+            best[towards], hinted[towards] = self._least_refuted(roots[chosen][towards], circles[towards],
+                                                                 ends[chosen][towards], forbidden[towards])
+            moved = np.linalg.norm(circles[np.arange(chosen.size), best] - middles[chosen], axis=1)
+        hinted &= moved > self.min_distance
         return {limbs[chosen[limb]]: circles[limb, best[limb]] for limb in limbs_read if hinted[limb]}
