@@ -22,6 +22,7 @@ import argparse
 import contextlib
 import signal
 import threading
+import time
 import types
 import typing
 import warnings
@@ -80,11 +81,11 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
                              "trial (joint centres from markers are not rigid across takes); images: each leg's "
                              "length chosen on the silhouettes (two views or more), the arms by reach; "
                              "report.json gives each segment's change (default: off)")
-    parser.add_argument("--target-filter", default="off", metavar="auto|off|HZ",
+    parser.add_argument("--target-filter", default="auto", metavar="auto|off|HZ",
                         help="low-pass each target keypoint over time (zero-lag 4th-order Butterworth): auto "
                              "chooses each keypoint's cutoff from the trial's residual analysis, a number is the "
                              "cutoff in Hz; report.json's target_filter gives the cutoffs and the change "
-                             "(default: off)")
+                             "(default: auto; noise-free or already filtered keypoints are left nearly as they are)")
     parser.add_argument("--method", choices=sorted(SOLVERS), default="qp",
                         help="solver scheme (default: qp, the hierarchical QP with joint limits)")
     parser.add_argument("--qp-solver", metavar="NAME",
@@ -311,12 +312,27 @@ def main(argv: list[str] | None = None) -> int:
         return _run(arguments)
 
 
+def _command_started() -> float | None:
+    """The time.perf_counter() at which this process started, when it is the `ibik` command: its
+    interpreter's start and imports (about 1.5 s of a run on the demo's videos) then count in
+    report.json's end-to-end time. None when another program calls main, or where the system does
+    not tell a process's start (Linux's /proc does)."""
+    if Path(sys.argv[0]).stem != "ibik":
+        return None
+    try:
+        after_name = Path("/proc/self/stat").read_text().rpartition(")")[2].split()
+        age = time.clock_gettime(time.CLOCK_BOOTTIME) - int(after_name[19]) / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError, AttributeError):
+        return None
+    return time.perf_counter() - age if 0.0 <= age < 3600.0 else None
+
+
 def _run(arguments: argparse.Namespace) -> int:
     try:
         if arguments.command == "track":
             from ibik_pin.app.track import run_track
 
-            report = run_track(_job(arguments))
+            report = run_track(_job(arguments), started=_command_started())
             if not arguments.quiet:
                 lines = report.summary_lines()
                 print(f"wrote {arguments.out}: {lines[0]}")

@@ -25,7 +25,7 @@ from ibik_pin.vision.camera import cameras_in_frame
 from ibik_pin.vision.camera_diagnosis import diagnose_cameras
 from ibik_pin.vision.learned_pose import LANDMARKS, MEDIAPIPE_INSTALL, learned_pose_available
 from ibik_pin.vision.mask_store import CroppedMasks
-from ibik_pin.vision.people import ViewPeople
+from ibik_pin.vision.people import SEARCH_EVERY, SEARCH_EVERY_LONGEST, SearchSchedule, ViewPeople
 from ibik_pin.vision.person_association import PeopleTracks, associate_people
 from ibik_pin.vision.person_views import person_pose
 from ibik_pin.vision.triangulation import POSE2SIM_FROM_LANDMARKS, labelled_landmarks, triangulate_landmarks
@@ -140,6 +140,23 @@ def test_views_that_cannot_be_reconciled_are_refused(excerpt_people):
     tracks = associate_people(wrong, detected.views, 60.0)
     with pytest.raises(InputError, match="cannot be reconciled"):
         person_pose(wrong, detected.views, tracks, chosen_person("auto", tracks))
+
+
+def test_searches_thin_out_while_they_find_nobody_and_come_back_when_people_change():
+    schedule = SearchSchedule()
+    searched = []
+    for frame in range(200):
+        if schedule.due(frame):
+            searched.append(frame)
+        # someone new on the first frame, nobody else until a tracker loses its person on frame 120
+        schedule.update(frame, schedule.due(frame), found=frame == 0, lost=frame == 120)
+    assert searched == [0, 6, 18, 42, 90, 126, 138, 162]  # intervals 6, 12, 24, 48 (the longest); 6, 12, 24 again
+    assert SEARCH_EVERY == 6 and SEARCH_EVERY_LONGEST == 48
+    everyone_followed = SearchSchedule()
+    everyone_followed.update(0, searched=True, found=True, lost=False)
+    for frame in range(6, 9):  # no idle tracker to search: the search stays due
+        everyone_followed.update(frame, searched=False, found=False, lost=False)
+        assert everyone_followed.due(frame + 1)
 
 
 def test_person_option_values():

@@ -233,7 +233,7 @@ class TrackingReport:
             (app.video_people.PeopleReport); None otherwise.
         stage_seconds: wall time of each stage of the run [s] (see :data:`UNITS`).
         detection_seconds: decoding and detection summed over the views' worker processes [s].
-        end_to_end_seconds: wall time of the whole run, reading to writing [s].
+        end_to_end_seconds: wall time of the whole run, the command's start to the outputs [s] (UNITS).
         end_to_end_frames_per_second: frames per second of end_to_end_seconds, detection included.
         warnings: every warning the run gave on stderr, in order, each once.
         kept_user_files: the files of an earlier output that ibik did not write, kept in OUTDIR.

@@ -75,18 +75,24 @@ UNITS = {
     "people.max_people": "trackers per view: the most people followed at once in a view",
     "people.detect_height": "px: the height frames were fed to MediaPipe at (0: full size)",
     "people.workers": "processes the views were detected in (at most one per camera, at most the usable cores)",
-    "stage_seconds": ("s: wall time of each stage: detection (decoding and MediaPipe, the views in parallel "
+    "stage_seconds": ("s: wall time of each stage: startup (the `ibik` command's start and imports; absent when "
+                      "another program runs the job), detection (decoding and MediaPipe, the views in parallel "
                       "processes), association (people across views and time), triangulation (with the cameras' "
-                      "check), calibration (the subject's lengths), solve (the frame loop); absent stages left out"),
+                      "check), calibration (the subject's lengths), solve (the frame loop), outputs (the files "
+                      "written); absent stages left out"),
+    "stage_seconds.startup": "s: see stage_seconds",
     "stage_seconds.detection": "s: see stage_seconds",
     "stage_seconds.association": "s: see stage_seconds",
     "stage_seconds.triangulation": "s: see stage_seconds",
     "stage_seconds.calibration": "s: see stage_seconds",
     "stage_seconds.solve": "s: see stage_seconds",
+    "stage_seconds.outputs": "s: see stage_seconds",
     "detection_seconds": "null without MediaPipe on --videos; otherwise detection_seconds.*",
     "detection_seconds.decode": "s: decoding the videos, summed over the views (processor time in the workers)",
     "detection_seconds.detection": "s: MediaPipe, summed over the views (processor time in the workers)",
-    "end_to_end_seconds": "s: wall time of the whole run, from reading the inputs to the written outputs",
+    "end_to_end_seconds": ("s: wall time of the whole run as its user waits for it: from the `ibik` command's start "
+                           "(its imports included) to the written outputs (report.json and the move into OUTDIR, "
+                           "a few ms, left out); from the call to run_track when another program runs the job"),
     "end_to_end_frames_per_second": ("frames per second of end_to_end_seconds: detection, triangulation, "
                                      "calibration and solve included (frames_per_second is the frame loop's)"),
     "extrinsics.diagnosis": ("per camera: 'agrees', or why it disagrees with the others (more than twice their "

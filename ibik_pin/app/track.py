@@ -141,12 +141,14 @@ def _stature(names: list[str], targets_m: np.ndarray) -> float:
     return float(np.nanmedian(head - lowest))
 
 
-def run_track(job: TrackJob, detected: DetectedPeople | None = None) -> TrackingReport:
+def run_track(job: TrackJob, detected: DetectedPeople | None = None, started: float | None = None) -> TrackingReport:
     """Run the whole job; returns the report that was written to OUTDIR/report.json.
 
     With --person all, each person the views agree on is tracked into OUT/person_N (the detection
     made once) and the first one's report is returned. `detected`: the videos' people, if already
-    detected (app.video_people).
+    detected (app.video_people). `started`: the time.perf_counter() at which the user's command
+    started (the `ibik` command's, before its imports), from which the end-to-end time counts;
+    default: this call.
 
     OUTDIR is checked first (app.outdir), and the outputs go to a staging folder made before
     any work, so that an OUTDIR that cannot be written is found at once. An earlier output's files
@@ -159,7 +161,7 @@ def run_track(job: TrackJob, detected: DetectedPeople | None = None) -> Tracking
     staging = make_staging(out)
     try:
         with _warnings_recorded() as said:
-            report = _run_into(staging, job, detected)
+            report = _run_into(staging, job, detected, started)
             kept_ahead = user_paths(out) if out.is_dir() else []
             if kept_ahead:  # said before publishing, so that report.json lists it too
                 warnings.warn(kept_message(out, kept_ahead), IbikWarning, stacklevel=2)
@@ -225,9 +227,12 @@ def _job_cameras(job: TrackJob) -> list:
     return cameras
 
 
-def _run_into(staging: Path, job: TrackJob, detected: DetectedPeople | None = None) -> TrackingReport:
+def _run_into(staging: Path, job: TrackJob, detected: DetectedPeople | None = None,
+              command_started: float | None = None) -> TrackingReport:
     """Read, check, track and write every output into `staging`."""
     started = time.perf_counter()
+    startup = started - command_started if command_started is not None else None
+    started = command_started if command_started is not None else started
     cameras = _job_cameras(job)
     if job.calibration is not None:
         check_camera_focal_lengths(cameras)
@@ -297,7 +302,7 @@ def _run_into(staging: Path, job: TrackJob, detected: DetectedPeople | None = No
     add_jumps(diagnosis, jumps, trc.frame_numbers)
     check_axes(diagnosis, axes)
     # Every keypoint scales the segments, tracked or not.
-    stages = dict(videos.stage_seconds)
+    stages = dict(videos.stage_seconds) if startup is None else {"startup": startup, **videos.stage_seconds}
     calibration_started = time.perf_counter()
     body = prepare_body(job, names, targets_m, calibrate_on_targets=videos.triangulation is not None)
     trial_lengths = None
@@ -336,11 +341,13 @@ def _run_into(staging: Path, job: TrackJob, detected: DetectedPeople | None = No
                     result.inside_fraction)
     silhouette_report = reader.quality(videos.segmenter) if reader is not None else None
 
+    outputs_started = time.perf_counter()
     # tracker.settings: as solved (a stack's image task may set the criterion)
     report = write_outputs(staging, job, tracker.settings, targets.stem, trc, body, cameras, silhouettes, result,
                            axes, outliers[:, tracked], silhouette_report=silhouette_report,
                            triangulation_report=videos.triangulation, extrinsics=videos.extrinsics,
                            trial_lengths=trial_lengths)
+    stages["outputs"] = time.perf_counter() - outputs_started
     report.diagnosis = diagnosis.to_report()
     report.target_filter = target_filter.report()
     report.people, report.stage_seconds = videos.people, stages

@@ -290,8 +290,10 @@ def keep_subject(mask: np.ndarray, pixels: np.ndarray, radius_px: np.ndarray) ->
         u0, u1 = max(int(round(u)) - r, 0), min(int(round(u)) + r + 1, width)
         v0, v1 = max(int(round(v)) - r, 0), min(int(round(v)) + r + 1, height)
         if u0 < u1 and v0 < v1:
-            keep[np.unique(labels[v0:v1, u0:u1])] = True
+            keep[labels[v0:v1, u0:u1]] = True
     keep[0] = False
+    if keep[1:].all():  # the usual case: the subject alone, in one part or several
+        return mask.astype(bool)
     return keep[labels]
 
 

@@ -10,18 +10,22 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import pickle
 import queue
+import subprocess
+import sys
+import threading
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
+from ibik_pin.app.people_worker import detect_one, read_message
 from ibik_pin.exceptions import IbikError, InputError, UnreconciledViewsError
-from ibik_pin.io.video import read_frames
-from ibik_pin.vision.people import DetectionSettings, ViewPeople, detect_people
+from ibik_pin.vision.people import DetectionSettings, ViewPeople
 from ibik_pin.vision.person_association import PeopleTracks, associate_people
 
 __all__ = ["PERSON_RULE", "DetectedPeople", "PeopleReport", "chosen_person", "detect_people_in_videos",
@@ -129,37 +133,34 @@ def usable_cores() -> int:
         return os.cpu_count() or 1
 
 
-def _timed(frames: Iterator[np.ndarray], spent: list[float]) -> Iterator[np.ndarray]:
-    """The frames, the time spent decoding them added to spent[0]."""
-    while True:
-        start = time.perf_counter()
-        try:
-            frame = next(frames)
-        except StopIteration:
-            spent[0] += time.perf_counter() - start
-            return
-        spent[0] += time.perf_counter() - start
-        yield frame
-
-
-def _detect_one(path: Path, settings: DetectionSettings, tick) -> tuple[ViewPeople, float, float]:
-    """One view's people, its decode seconds and its detection seconds."""
-    decode = [0.0]
-    start = time.perf_counter()
-    people = detect_people(_timed(read_frames(path), decode), settings, progress=tick)
-    return people, decode[0], time.perf_counter() - start - decode[0]
-
-
-def _worker(jobs: list[tuple[int, Path]], settings: DetectionSettings, messages) -> None:
-    """A worker process: detect each (view, video) in `jobs`, report frames and results on `messages`."""
+def _start_worker(jobs: list[tuple[int, Path]], settings: DetectionSettings,
+                  messages: queue.Queue) -> subprocess.Popen:
+    """A worker process (app.people_worker) detecting `jobs`; a thread puts its messages on
+    `messages`, then ("ended", process) when its pipe closes."""
+    read_end, write_end = os.pipe()
+    package_root = str(Path(__file__).resolve().parents[2])
+    search_path = os.pathsep.join(filter(None, [package_root, os.environ.get("PYTHONPATH")]))
     try:
-        for view, path in jobs:
-            people, decode, detection = _detect_one(path, settings, lambda count: messages.put(("frames", count)))
-            messages.put(("done", view, people, decode, detection))
-    except IbikError as error:
-        messages.put(("error", str(error)))
-    except Exception as error:  # the parent re-raises it as the package's error
-        messages.put(("error", f"{type(error).__name__}: {error}"))
+        process = subprocess.Popen([sys.executable, "-m", "ibik_pin.app.people_worker", str(write_end)],
+                                   stdin=subprocess.PIPE, pass_fds=(write_end,),
+                                   env=dict(os.environ, PYTHONPATH=search_path))
+    except BaseException:
+        os.close(read_end)
+        raise
+    finally:
+        os.close(write_end)
+
+    def relay() -> None:
+        with os.fdopen(read_end, "rb") as pipe:
+            while (message := read_message(pipe)) is not None:
+                messages.put(message)
+        messages.put(("ended", process))
+
+    threading.Thread(target=relay, name="ibik-people-relay", daemon=True).start()
+    if process.stdin is not None:
+        with process.stdin:
+            pickle.dump((jobs, settings), process.stdin, protocol=pickle.HIGHEST_PROTOCOL)
+    return process
 
 
 def detect_people_in_videos(videos: dict[str, Path], cameras: Sequence, frame_rate: float, *, progress: bool,
@@ -178,7 +179,7 @@ def detect_people_in_videos(videos: dict[str, Path], cameras: Sequence, frame_ra
     settings = settings if settings is not None else DetectionSettings()
     names = [camera.name for camera in cameras]
     workers = max(1, min(workers or usable_cores(), len(names)))
-    if multiprocessing.current_process().daemon:  # a daemonic worker (a pool's) may not start processes
+    if multiprocessing.current_process().daemon:  # a pool's worker: the pool already spreads trials over the cores
         workers = 1
     views: list[ViewPeople | None] = [None] * len(names)
     decode = detection = 0.0
@@ -187,38 +188,37 @@ def detect_people_in_videos(videos: dict[str, Path], cameras: Sequence, frame_ra
               disable=None if progress else True) as bar:
         if workers == 1:
             for index, name in enumerate(names):
-                people, seconds_decode, seconds_detect = _detect_one(videos[name], settings, bar.update)
+                people, seconds_decode, seconds_detect = detect_one(videos[name], settings, bar.update)
                 views[index], decode, detection = people, decode + seconds_decode, detection + seconds_detect
         else:
-            # spawn, not fork: a forked MediaPipe (already run in this process) dies in the child.
-            context = multiprocessing.get_context("spawn")
-            messages = context.Queue()
+            messages: queue.Queue = queue.Queue()
             shares = [[(index, videos[name]) for index, name in enumerate(names) if index % workers == worker]
                       for worker in range(workers)]
-            processes = [context.Process(target=_worker, args=(share, settings, messages), daemon=True,
-                                         name=f"ibik-people-{worker}") for worker, share in enumerate(shares)]
-            for process in processes:
-                process.start()
+            processes: list[subprocess.Popen] = []
             try:
+                for share in shares:
+                    processes.append(_start_worker(share, settings, messages))
                 while any(view is None for view in views):
-                    try:
-                        message = messages.get(timeout=1.0)
-                    except queue.Empty:
-                        if not any(process.is_alive() for process in processes):
-                            raise IbikError("--videos: a detection process ended without its result") from None
-                        continue
+                    message = messages.get()
                     if message[0] == "frames":
                         bar.update(message[1])
                     elif message[0] == "done":
                         _, index, people, seconds_decode, seconds_detect = message
                         views[index], decode, detection = people, decode + seconds_decode, detection + seconds_detect
+                    elif message[0] == "ended":
+                        share = shares[processes.index(message[1])]
+                        if any(views[index] is None for index, _ in share):
+                            raise IbikError("--videos: a detection process ended without its result (exit code "
+                                            f"{message[1].wait()})")
                     else:
                         raise InputError(message[1])
             finally:
                 for process in processes:
-                    process.join(timeout=5.0)
-                    if process.is_alive():
-                        process.terminate()
+                    try:
+                        process.wait(timeout=5.0)
+                    except subprocess.TimeoutExpired:  # still detecting: an error elsewhere ended the run
+                        process.kill()
+                        process.wait()
     wall = time.perf_counter() - start
     counts = {name: view.frames for name, view in zip(names, views, strict=True) if view is not None}
     if len(set(counts.values())) > 1:

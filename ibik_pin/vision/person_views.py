@@ -71,14 +71,16 @@ def person_pose(cameras: Sequence, views: Sequence[ViewPeople], tracks: PeopleTr
             identities = tracks.identity[view, frame, :slots_of_view]
             slots = np.flatnonzero(identities == person)
             if slots.size == 0:
-                masks.append(np.zeros((people.size[1], people.size[0]), bool))
+                masks.append_crop(0, 0, np.zeros((0, 0), bool))
                 continue
             slot = int(slots[0])
             keypoints[frame], visibility[frame] = people.keypoints[frame, slot], people.visibility[frame, slot]
+            others = [other for other in np.flatnonzero(present[frame]) if other != slot]
+            if not others:  # alone in the view: the tracker's silhouette as stored
+                masks.append_crop(*people.masks[slot].crop(frame))
+                continue
             mask = people.masks[slot][frame]
-            for other in np.flatnonzero(present[frame]):
-                if other == slot:
-                    continue
+            for other in others:
                 other_mask = people.masks[other][frame]
                 mask &= ~other_mask
                 visibility[frame] = np.where(_inside(other_mask, keypoints[frame]), 0.0, visibility[frame])
