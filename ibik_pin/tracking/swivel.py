@@ -340,11 +340,13 @@ class SwivelSearch:
             finer_forbidden = self._inside_trunk(configuration, elbows, finer)
             # The final best is the first pass's or a finer point: where all of them lie within
             # min_distance of the joint (and it is not trapped), no hint can come of the limb, so
-            # its finer points are not scored (left out as forbidden): the same hints. On real
-            # walking (2 views) 78 of 266 limbs and 15 of 120 second passes were left out.
+            # its finer points are not scored (left out as forbidden): the same hints. Not for an
+            # elbow that the silhouettes may move elsewhere (_least_refuted picks among every
+            # candidate). On real walking (2 views) 78 of 266 limbs and 15 of 120 second passes
+            # were left out before that rule.
             reach = np.linalg.norm(np.concatenate([finer, circles[np.arange(chosen.size), best][:, None]], axis=1)
                                    - middles[chosen][:, None], axis=2).max(axis=1)
-            scored = (reach > self.min_distance) | forbidden[:, 0]
+            scored = (reach > self.min_distance) | forbidden[:, 0] | (elbows & self.keep_unrefuted)
             finer_weighted = np.zeros((*weighted.shape[:2], finer.shape[1]))
             if scored.any():
                 finer_weighted[:, scored] = self._weighted(poses, limb_ids[chosen[scored], 1], finer[scored])[0]
