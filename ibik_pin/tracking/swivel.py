@@ -251,8 +251,9 @@ class SwivelSearch:
         towards = np.zeros(len(elbows), dtype=bool)
         if not self.keep_unrefuted or self.inside_silhouettes is None or self._trunk_ids is None or not elbows.any():
             return towards
-        distance, _ = trunk_distance(np.stack([middles[elbows], picked[elbows]], axis=1),
-                                     *configuration.frame_positions(self._trunk_ids), self.nearer_section)
+        hip, neck, left_shoulder, right_shoulder = configuration.frame_positions(self._trunk_ids)
+        distance, _ = trunk_distance(np.stack([middles[elbows], picked[elbows]], axis=1), hip, neck, left_shoulder,
+                                     right_shoulder, self.nearer_section)
         towards[elbows] = distance[:, 1] < distance[:, 0]
         return towards
 
