@@ -7,8 +7,12 @@ a limb the silhouettes do not refute gets no hint) and once hinting every limb a
 inputs, same process: the difference is the rule alone. Prints and writes each run's mean error
 per joint [mm].
 
+With --real-mocap OUT, runs ``experiments/real_mocap.py --quick`` instead, with the earlier search
+and then with the tracker's (OUT/before, OUT/after; the rendered inputs cached in OUT/cache).
+
 Usage:
     python experiments/swivel_refute_paired.py --keep /tmp/h4_inputs --conditions 0-13 --out out/h4_paired.json
+    python experiments/swivel_refute_paired.py --real-mocap out/h4_real_mocap
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ from __future__ import annotations
 import argparse
 import functools
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -48,9 +53,26 @@ def run(inputs, kind: str, search: dict) -> dict:
     return {joint: float(np.mean(result.errors[:, k]) * 1e3) for k, joint in enumerate(JOINTS)}
 
 
+def real_mocap_before_after(out: Path, before: dict, after: dict) -> None:
+    """experiments/real_mocap.py --quick with each search (its main reads sys.argv)."""
+    import real_mocap
+
+    for name, search in (("before", before), ("after", after)):
+        tracker_module.SwivelSearch = functools.partial(SwivelSearch, **search)  # type: ignore[misc]
+        saved = sys.argv
+        sys.argv = ["real_mocap.py", "--quick", "--out", str(out / name), "--cache", str(out / "cache")]
+        try:
+            real_mocap.main()
+        finally:
+            sys.argv = saved
+            tracker_module.SwivelSearch = SwivelSearch  # type: ignore[misc]
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--keep", type=Path, required=True, help="the folder sweep.py --keep wrote")
+    parser.add_argument("--keep", type=Path, help="the folder sweep.py --keep wrote")
+    parser.add_argument("--real-mocap", type=Path, default=None, metavar="OUT",
+                        help="run real_mocap.py --quick before and after into OUT instead")
     parser.add_argument("--conditions", default="0-13", help="indices, e.g. 0-13 or 8,22,36")
     parser.add_argument("--silhouettes", default="clean,defects")
     parser.add_argument("--seed", type=int, default=0)
@@ -60,6 +82,11 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--after", type=json.loads, default={},
                         help="SwivelSearch fields of the later run, JSON (default: the defaults)")
     arguments = parser.parse_args(argv)
+    if arguments.real_mocap is not None:
+        real_mocap_before_after(arguments.real_mocap, arguments.before, arguments.after)
+        return
+    if arguments.keep is None:
+        parser.error("--keep: the folder sweep.py --keep wrote (or --real-mocap OUT)")
     rows = []
     for index in _indices(arguments.conditions):
         condition = draw_condition(index, arguments.seed)

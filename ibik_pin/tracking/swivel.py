@@ -209,7 +209,7 @@ class SwivelSearch:
             support, capped at a limb's half width, is deeper over the trunk than over a thin arm:
             so the criterion prefers an arm laid over or in front of the trunk wherever both views
             see it there. On jumps (2 views, clean) such hints put right elbows 50 mm off on
-            average where the prior's were 16-18 (docs/sweep.md, "Elbows the image made worse").
+            average where the prior's were 16-18 (docs/method.md, "Elbows the image made worse than no image").
     """
 
     body: BodyModel
