@@ -199,7 +199,8 @@ def restrict_to_subject(video_masks: Sequence[CroppedMasks], cameras: Sequence, 
             if len(present) and crop.size:
                 kept = keep_subject(crop, camera.project(present) - (left, top),
                                     camera.pixel_radius(present, SUBJECT_MARGIN_M))
-                masks.set_crop(frame, top, left, kept)
+                if kept is not crop:  # a part was cut
+                    masks.set_crop(frame, top, left, kept)
 
 
 def resolve_segmenter(requested: str, keypoints_needed: bool) -> str:
@@ -271,7 +272,8 @@ def video_frame_rate(path: Path) -> float:
 
 
 def keep_subject(mask: np.ndarray, pixels: np.ndarray, radius_px: np.ndarray) -> np.ndarray:
-    """The parts of a mask (8-connected) that hold a target pixel or lie within its radius.
+    """The parts of a mask (8-connected) that hold a target pixel or lie within its radius; the
+    bool `mask` itself, not a copy, when every part is kept.
 
     Args:
         mask: (H, W) bool.
@@ -280,7 +282,7 @@ def keep_subject(mask: np.ndarray, pixels: np.ndarray, radius_px: np.ndarray) ->
     """
     count, labels = cv2.connectedComponents(mask.astype(np.uint8), connectivity=8)
     if count <= 1:
-        return mask.astype(bool)
+        return np.asarray(mask, bool)  # `mask` itself when it is bool: nothing to cut
     height, width = mask.shape
     keep = np.zeros(count, bool)
     for (u, v), radius in zip(pixels, radius_px, strict=True):
@@ -293,7 +295,7 @@ def keep_subject(mask: np.ndarray, pixels: np.ndarray, radius_px: np.ndarray) ->
             keep[labels[v0:v1, u0:u1]] = True
     keep[0] = False
     if keep[1:].all():  # the usual case: the subject alone, in one part or several
-        return mask.astype(bool)
+        return np.asarray(mask, bool)
     return keep[labels]
 
 
