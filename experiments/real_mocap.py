@@ -47,6 +47,8 @@ from realdata.runner import (
     variant,
 )
 
+from ibik_pin.app.job import TrackJob
+
 DEFAULTS = {"clips": ",".join(CLIPS), "views": "1,2,4", "conditions": ",".join(CONDITIONS), "frames": 120,
             "variants": "ik,pik,ibik"}
 QUICK = {"clips": "cmu35_01,boxing_a", "views": "2", "conditions": "clean,defects", "frames": 40,
@@ -87,9 +89,10 @@ def main() -> None:
                         help="override a TrackingSettings field for every variant (repeatable)")
     parser.add_argument("--drop-targets", default="", metavar="NAMES",
                         help="comma-separated target keypoints to leave out, e.g. LBigToe,RBigToe")
-    parser.add_argument("--target-filters", default="off", metavar="VALUES",
-                        help="ibik track --target-filter values, comma-separated (default off); with several, "
-                             "each one's tables and runs go to <out>/filter_<value>/")
+    parser.add_argument("--target-filters", default=str(TrackJob.__dataclass_fields__["target_filter"].default),
+                        metavar="VALUES",
+                        help="ibik track --target-filter values, comma-separated (default: ibik track's); with "
+                             "several, each one's tables and runs go to <out>/filter_<value>/")
     parser.add_argument("--quick", action="store_true",
                         help="40 frames, cmu35_01 and boxing_a, IK, PIK and IBIK 2v (explicit flags win)")
     parser.add_argument("--quiet", action="store_true", help="print only the tables' path and the wall time")

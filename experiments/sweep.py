@@ -35,6 +35,8 @@ from sweepkit.conditions import draw_condition, load_condition, write_condition
 from sweepkit.lengths import LENGTHS, image_static, oracle_static, reach_static
 from sweepkit.runs import markdown, paired_markdown, run_condition_variant, summarize
 
+from ibik_pin.app.job import TrackJob
+
 DEFAULTS = {"conditions": 42, "frames": 40, "rate": 30.0, "views": "1,2,4", "silhouettes": "clean,defects"}
 QUICK = {"conditions": 2, "frames": 12, "rate": 30.0, "views": "2", "silhouettes": "clean,defects"}
 
@@ -66,9 +68,9 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--reach-smoothing", type=int, default=3, metavar="FRAMES",
                         help="frames the targets' reach is averaged over before its bound (trial_lengths; "
                              "default 3)")
-    parser.add_argument("--target-filters", default="off",
+    parser.add_argument("--target-filters", default=str(TrackJob.__dataclass_fields__["target_filter"].default),
                         help="ibik track --target-filter values, each run on every condition and variant, "
-                             "paired (e.g. off,auto; default off)")
+                             "paired (e.g. off,auto; default: ibik track's)")
     parser.add_argument("--keep", type=Path, default=None,
                         help="keep each condition's files under this folder, and reuse those already there")
     parser.add_argument("--quick", action="store_true", help="2 conditions of 12 frames, IBIK 2 views (a smoke test)")

@@ -83,18 +83,47 @@ def test_the_noise_raises_the_cutoff_less_as_the_motion_gets_faster():
     assert residual_cutoff(fast[:, 0], 60.0)[0] > residual_cutoff(slow[:, 0], 60.0)[0]
 
 
-def test_missing_frames_split_the_track_and_short_runs_stay_as_they_are():
+def test_a_short_gap_is_bridged_a_long_one_splits_the_track_and_missing_frames_stay_missing():
     rng = np.random.default_rng(1)
-    raw = smooth_motion(30.0, 60)[:, 0] + rng.normal(0.0, 0.005, (60, 3))
-    raw[20:22] = np.nan  # a gap: runs 0-19 and 22-59
-    raw[55, 1] = np.nan  # one missing coordinate makes the frame missing: run 22-54, then 56-59 (short)
-    filtered = lowpass(raw, 30.0, 4.0)
+    truth = smooth_motion(30.0, 90)[:, 0]
+    raw = truth + rng.normal(0.0, 0.005, (90, 3))
+    raw[20:22] = np.nan  # 2 frames: bridged for the filter
+    raw[40:60, 1] = np.nan  # 20 frames (0.67 s): one missing coordinate makes the frame missing; splits
+    raw[86:88] = np.nan  # leaves 2 frames at the end, after a bridged gap: still filtered with the run
+    filtered = lowpass(raw, 30.0, 6.0)
     assert np.array_equal(np.isnan(filtered), np.isnan(raw))
-    assert np.array_equal(filtered[56:], raw[56:])  # 4 frames < MIN_RUN_FRAMES
-    assert MIN_RUN_FRAMES > 60 - 56
-    assert not np.allclose(filtered[:20], raw[:20])
-    # Each run filtered on its own: the same as filtering that run alone.
-    assert np.allclose(filtered[22:55], lowpass(raw[22:55], 30.0, 4.0))
+    # Each side of the long gap filtered on its own: the same as filtering it alone.
+    assert np.allclose(filtered[60:], lowpass(raw[60:], 30.0, 6.0), equal_nan=True)
+    assert np.allclose(filtered[:40], lowpass(raw[:40], 30.0, 6.0), equal_nan=True)
+    # Around the bridged gap the filter removes noise as elsewhere.
+    around = [16, 17, 18, 19, 22, 23, 24, 25]
+    assert rms_mm(filtered[around], truth[around]) < rms_mm(raw[around], truth[around])
+    short = np.full((20, 3), np.nan)
+    short[5:5 + MIN_RUN_FRAMES - 1] = raw[:MIN_RUN_FRAMES - 1]  # too short a run, between long gaps
+    assert np.array_equal(lowpass(short, 30.0, 6.0), short, equal_nan=True)
+
+
+def test_at_15_hz_auto_leaves_the_targets_and_says_why():
+    truth = smooth_motion(15.0, 30) + np.random.default_rng(0).normal(0.0, 0.005, (30, 1, 3))
+    result = filter_targets(["LWrist"], truth, 15.0, "auto")
+    assert np.array_equal(result.positions, truth)
+    assert "no band of 2 Hz lies above the motion's 6 Hz" in result.report()["unfiltered_because"]
+    assert filter_targets(["LWrist"], truth, 30.0, "auto").report()["unfiltered_because"] is None
+
+
+def test_a_one_frame_leap_is_kept_as_it_is_and_not_smeared_into_its_neighbours():
+    rng = np.random.default_rng(4)
+    truth = smooth_motion(30.0, 60)
+    raw = truth + rng.normal(0.0, 0.003, truth.shape)
+    raw[30, 0, 2] += 0.8  # a glitch: 0.8 m in one frame, farther than 10 m/s moves in 1/30 s
+    result = filter_targets(["LAnkle"], raw, 30.0, "auto")
+    assert result.keypoints["LAnkle"].leaps == 1
+    assert np.array_equal(result.positions[30], raw[30])
+    neighbours = [29, 31]
+    # The neighbours filtered as if the glitch were not there: within a few mm of the truth.
+    assert np.max(np.linalg.norm(result.positions[neighbours, 0] - truth[neighbours, 0], axis=1)) < 0.008
+    # A punch's peak at 30 Hz is motion, not a leap.
+    assert filter_targets(["RWrist"], punches(30.0, 40), 30.0, "auto").keypoints["RWrist"].leaps == 0
 
 
 def test_a_keypoint_with_no_run_long_enough_is_left_and_reported_so():
@@ -169,8 +198,8 @@ def run_blind(paths, targets: Path, out: Path, *extra: str) -> tuple[dict, float
 
 def test_track_with_the_filter_reports_it_and_the_noise_leaves_the_joints(noisy_walk, tmp_path):
     paths, noisy = noisy_walk
-    report_off, off_mm = run_blind(paths, noisy, tmp_path / "off")
-    report_auto, auto_mm = run_blind(paths, noisy, tmp_path / "auto", "--target-filter", "auto")
+    report_off, off_mm = run_blind(paths, noisy, tmp_path / "off", "--target-filter", "off")
+    report_auto, auto_mm = run_blind(paths, noisy, tmp_path / "auto")  # the default
     assert report_off["target_filter"]["mode"] == "off"
     assert report_off["target_filter"]["keypoints"] == {}
     chosen = report_auto["target_filter"]

@@ -194,14 +194,14 @@ class RunResult:
 
 def run_variant(inputs: ClipInputs, chosen: Variant, condition: str, overrides: dict | None = None,
                 out: Path | None = None, drop_targets: typing.Sequence[str] = (),
-                target_filter: str | float = "off") -> RunResult:
+                target_filter: str | float | None = None) -> RunResult:
     """``ibik track`` on the clip's files as a user runs it.
 
     Args:
         out: where its outputs go (None: a temporary folder, removed afterwards).
         drop_targets: target keypoints left out of the targets file (e.g. LBigToe, RBigToe: with
             the ankle and the toe both targets, the model's 6-DOF leg has no swivel left).
-        target_filter: ``ibik track --target-filter`` (off, auto or a cutoff in Hz).
+        target_filter: ``ibik track --target-filter`` (off, auto or a cutoff in Hz; None: its default).
     """
     if condition not in CONDITIONS:
         raise UnknownNameError(f"condition: expected one of {', '.join(CONDITIONS)}, got {condition!r}")
@@ -226,7 +226,8 @@ def run_variant(inputs: ClipInputs, chosen: Variant, condition: str, overrides: 
         calibration=inputs.calibration if chosen.views else None,
         masks=inputs.masks(condition) if chosen.views else None,
         cameras=inputs.cameras[:chosen.views] if chosen.views else None,
-        settings=tracking_settings(chosen, condition, overrides), quiet=True, target_filter=target_filter,
+        settings=tracking_settings(chosen, condition, overrides), quiet=True,
+        **({} if target_filter is None else {"target_filter": target_filter}),
     )
     started = time.perf_counter()
     try:

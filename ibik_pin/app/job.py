@@ -61,8 +61,8 @@ class TrackJob:
     length on the silhouettes of two views or more, the arms' by reach (app.trial_lengths_images);
     "off" keeps the calibration's.
     `target_filter` low-passes each target keypoint over time before anything reads it
-    (tracking.target_filter): "auto" at the cutoff the trial's own residual analysis gives each
-    keypoint, a number at that cutoff [Hz], "off" not at all.
+    (tracking.target_filter): "auto" (default) at the cutoff the trial's own residual analysis
+    gives each keypoint, a number at that cutoff [Hz], "off" not at all.
     `targets` and `static` may be C3D files (recognised by content), their markers mapped to
     keypoints by `c3d_mapping` (a TOML mapping file; None: io.c3d's default mapping).
     """
@@ -86,7 +86,7 @@ class TrackJob:
     c3d_mapping: Path | None = None
     trial_lengths: str = "off"
     person: str | int = "auto"
-    target_filter: str | float = "off"
+    target_filter: str | float = "auto"
 
     def __post_init__(self) -> None:
         """Paths given as str become Paths; what the CLI refuses, the API refuses too (InputError)."""

@@ -135,7 +135,10 @@ UNITS = {
     "target_filter.median_change_rms_mm": "mm: the median over keypoints of the rms distance the filter moved them",
     "target_filter.keypoints": ("per keypoint: cutoff_hz (null: too few valid frames, left as is), noise_mm (the "
                                 "residual analysis's noise rms per coordinate; null for a fixed cutoff), "
-                                "change_rms_mm and change_max_mm (how far the filter moved it)"),
+                                "change_rms_mm and change_max_mm (how far the filter moved it), leap_frames (frames "
+                                "kept as they were: farther from their 5-frame median than 10 m/s moves in a frame)"),
+    "target_filter.unfiltered_because": ("null, or why auto left every target as it was (a frame rate too low to "
+                                         "tell noise from motion above 6 Hz)"),
     "warnings": "every warning the run gave on stderr (IbikWarning), in order, each once",
     "kept_user_files": ("paths in OUTDIR that an earlier output held and ibik did not write (not in its manifest): "
                         "kept beside the new outputs; empty folders end with /"),

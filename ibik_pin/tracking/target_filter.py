@@ -24,13 +24,27 @@ fast motion (a punch) keeps R high up to high cutoffs, so its cutoff rises with 
 or already filtered keypoint has a flat noise line, so its cutoff is high and the filter changes it
 by a fraction of a millimetre.
 
-Missing values (NaN) split a keypoint's track into runs of valid frames, each filtered on its own
-(padded by odd reflection, filtfilt's default, up to two periods of the cutoff); runs too short to
-tell motion from noise are left as they are.
+The noise line needs cutoffs above the motion's own band: above MOTION_BAND_HZ (6 Hz, Winter's
+gait figure) and half the Nyquist frequency. Below about 21 Hz no such band of 2 Hz is left, and
+"auto" leaves the targets as they are (report.json says why): at 15 Hz the analysis read a noise-
+free walk's footfalls as noise and moved its toes by 16 mm rms.
+
+Missing values (NaN) stay missing. A gap shorter than MAX_BRIDGE_S is bridged by a straight line
+for the filter (a dropped frame then moves its neighbours by millimetres, where splitting the track
+there moved them by up to 31 mm at 15 Hz); longer gaps split the track into runs, each filtered on
+its own (padded by odd reflection, filtfilt's default, up to two periods of the cutoff); runs too
+short to tell motion from noise are left as they are.
+
+A leap is not noise, nor motion: a frame where a keypoint lies farther from the median of the 5
+frames around it than it can move in a frame (LEAP_SPEED_M_S over the frame rate) and than
+LEAP_FACTOR times the track's median such distance is kept as it is, and the filter reads it as
+the line between its neighbours, so that a glitch is neither smeared into its neighbours nor
+hidden from the run's self-diagnosis (a frame whose leg targets leap 0.8 m is still flagged there).
 """
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -40,7 +54,7 @@ from scipy.signal import butter, filtfilt
 from ibik_pin.exceptions import InputError
 
 __all__ = ["TARGET_FILTER_MODES", "KeypointFilter", "TargetFilterResult", "filter_targets", "lowpass",
-           "parse_target_filter", "residual_curve", "residual_cutoff"]
+           "leaps", "noise_band", "parse_target_filter", "residual_curve", "residual_cutoff"]
 
 TARGET_FILTER_MODES = ("off", "auto")
 ORDER = 2  # per pass; forward and backward make a 4th-order zero-lag response
@@ -55,6 +69,19 @@ LOWEST_CUTOFF_HZ = 0.5
 CUTOFF_STEP_HZ = 0.1
 # Shorter runs of valid frames are left unfiltered: too few frames to tell motion from noise.
 MIN_RUN_FRAMES = 8
+# Gaps shorter than this [s] are bridged for the filter (module docstring).
+MAX_BRIDGE_S = 0.5
+# The noise line is fitted above the motion's band (Winter: most of gait's power below 6 Hz) and
+# needs a band at least this wide [Hz] there.
+MOTION_BAND_HZ = 6.0
+MIN_NOISE_BAND_HZ = 2.0
+# A leap (module docstring): farther from its 5-frame running median than this many times the
+# track's median such distance, and than a keypoint moves in one frame at this speed [m/s]: about
+# the fist's in a straight punch (9.1 m/s for Olympic boxers, Walilko, Viano and Bir, Br J Sports
+# Med 2005), as fast as a body part moves outside throwing; a reversal within a frame at that speed
+# departs from the running median by less than a frame's travel.
+LEAP_FACTOR = 10.0
+LEAP_SPEED_M_S = 10.0
 
 
 def parse_target_filter(value: str | float | int) -> str | float:
@@ -87,13 +114,64 @@ def lowpass(signal: np.ndarray, rate_hz: float, cutoff_hz: float) -> np.ndarray:
     nyquist = 0.5 * rate_hz
     design = min(cutoff_hz / PASS_CORRECTION, 0.99 * nyquist)
     b, a = butter(ORDER, design / nyquist)
-    out = signal.copy()
+    valid = np.all(np.isfinite(signal), axis=1)
+    bridged = _bridged(signal, _short_gaps(valid, int(MAX_BRIDGE_S * rate_hz)))
+    out = bridged.copy()
     pad_frames = int(np.ceil(2.0 * rate_hz / cutoff_hz))
-    for start, stop in _runs(np.all(np.isfinite(signal), axis=1)):
+    for start, stop in _runs(np.all(np.isfinite(bridged), axis=1)):
         if stop - start >= MIN_RUN_FRAMES:
-            out[start:stop] = filtfilt(b, a, signal[start:stop], axis=0,
+            out[start:stop] = filtfilt(b, a, bridged[start:stop], axis=0,
                                        padlen=min(stop - start - 1, max(3 * (ORDER + 1), pad_frames)))
+    out[~valid] = signal[~valid]
     return out
+
+
+def _short_gaps(valid: np.ndarray, longest: int) -> np.ndarray:
+    """(F,) bool: the missing frames of interior gaps of at most `longest` frames."""
+    short = np.zeros_like(valid)
+    for start, stop in _runs(~valid):
+        if start > 0 and stop < len(valid) and stop - start <= longest:
+            short[start:stop] = True
+    return short
+
+
+def noise_band(rate_hz: float) -> tuple[float, float] | None:
+    """The cutoffs [Hz] the noise line is fitted over at this frame rate, or None when no band of
+    MIN_NOISE_BAND_HZ lies above the motion's (module docstring)."""
+    low = max(NOISE_LINE_FROM * 0.5 * rate_hz, MOTION_BAND_HZ)
+    high = HIGHEST_CUTOFF * 0.5 * rate_hz
+    return (low, high) if high - low >= MIN_NOISE_BAND_HZ else None
+
+
+def leaps(track: np.ndarray, rate_hz: float) -> np.ndarray:
+    """(F,) bool: the frames where the (F, 3) track leaps from the median of the 5 frames around it
+    (LEAP_FACTOR, LEAP_SPEED_M_S); missing frames are never leaps."""
+    frames = track.shape[0]
+    padded = np.concatenate([np.full((2, 3), np.nan), track, np.full((2, 3), np.nan)])
+    windows = np.stack([padded[offset:offset + frames] for offset in range(5)])
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # an all-missing window: its median is NaN
+        distance = np.linalg.norm(track - np.nanmedian(windows, axis=0), axis=1)
+    finite = np.isfinite(distance)
+    if not finite.any():
+        return np.zeros(frames, dtype=bool)
+    threshold = max(LEAP_FACTOR * float(np.median(distance[finite])), LEAP_SPEED_M_S / rate_hz)
+    return finite & (distance > threshold)
+
+
+def _bridged(track: np.ndarray, chosen: np.ndarray) -> np.ndarray:
+    """The (F, C) track with its `chosen` frames on the line between the nearest valid frames
+    around them (the nearest one at an end)."""
+    if not chosen.any():
+        return track
+    valid = np.all(np.isfinite(track), axis=1) & ~chosen
+    if not valid.any():
+        return track
+    frames = np.arange(track.shape[0])
+    bridged = track.copy()
+    for axis in range(track.shape[1]):
+        bridged[chosen, axis] = np.interp(frames[chosen], frames[valid], track[valid, axis])
+    return bridged
 
 
 def candidate_cutoffs(rate_hz: float) -> np.ndarray:
@@ -116,9 +194,13 @@ def residual_cutoff(signal: np.ndarray, rate_hz: float) -> tuple[float, float]:
     """(cutoff [Hz], noise rms per coordinate [signal units]) of the residual analysis on the (F, C)
     signal: the noise line fitted to R^2 at the upper cutoffs; the cutoff that minimises the signal
     removed plus the noise kept (module docstring)."""
+    band = noise_band(rate_hz)
+    if band is None:
+        raise InputError(f"rate_hz: {rate_hz:g} Hz leaves no band above the motion's {MOTION_BAND_HZ:g} Hz to "
+                         "measure the noise in", parameter="rate_hz")
     cutoffs = candidate_cutoffs(rate_hz)
     power = residual_curve(signal, rate_hz, cutoffs) ** 2
-    upper = cutoffs >= NOISE_LINE_FROM * 0.5 * rate_hz
+    upper = cutoffs >= band[0] - 1e-9
     slope, intercept = np.polyfit(cutoffs[upper], power[upper], 1)
     slope = min(float(slope), 0.0)  # a rising residual is no noise
     cutoff = float(cutoffs[np.argmin(power - 2.0 * slope * cutoffs)])
@@ -129,22 +211,25 @@ def residual_cutoff(signal: np.ndarray, rate_hz: float) -> tuple[float, float]:
 class KeypointFilter:
     """What the filter did to one keypoint: its cutoff [Hz] (None: left unfiltered, too few valid
     frames), the residual analysis's noise estimate (rms per coordinate; None for a fixed cutoff),
-    and the rms and largest change it made [m]."""
+    the rms and largest change it made [m], and the frames kept as leaps."""
 
     cutoff_hz: float | None
     noise_m: float | None
     change_rms_m: float
     change_max_m: float
+    leaps: int = 0
 
 
 @dataclass
 class TargetFilterResult:
-    """The filtered targets and, per keypoint, the cutoff and the change."""
+    """The filtered targets and, per keypoint, the cutoff and the change; `unfiltered_because`
+    says why "auto" left every keypoint as it was (a frame rate too low to tell noise from motion)."""
 
     mode: str
     rate_hz: float
     positions: np.ndarray
     keypoints: dict[str, KeypointFilter] = field(default_factory=dict)
+    unfiltered_because: str | None = None
 
     def report(self) -> dict:
         """For report.json's `target_filter`: the mode, the rate, per keypoint the cutoff [Hz], the
@@ -152,12 +237,13 @@ class TargetFilterResult:
         cutoffs = [k.cutoff_hz for k in self.keypoints.values() if k.cutoff_hz is not None]
         changes = [k.change_rms_m for k in self.keypoints.values()]
         return {
-            "mode": self.mode, "frame_rate_hz": self.rate_hz,
+            "mode": self.mode, "frame_rate_hz": self.rate_hz, "unfiltered_because": self.unfiltered_because,
             "median_cutoff_hz": float(np.median(cutoffs)) if cutoffs else None,
             "median_change_rms_mm": float(np.median(changes) * 1e3) if changes else None,
             "keypoints": {name: {"cutoff_hz": k.cutoff_hz,
                                  "noise_mm": None if k.noise_m is None else k.noise_m * 1e3,
-                                 "change_rms_mm": k.change_rms_m * 1e3, "change_max_mm": k.change_max_m * 1e3}
+                                 "change_rms_mm": k.change_rms_m * 1e3, "change_max_mm": k.change_max_m * 1e3,
+                                 "leap_frames": k.leaps}
                           for name, k in self.keypoints.items()},
         }
 
@@ -178,9 +264,15 @@ def filter_targets(names: Sequence[str], positions: np.ndarray, rate_hz: float,
     result = TargetFilterResult(mode, float(rate_hz), positions.copy())
     if setting == "off":
         return result
+    if setting == "auto" and noise_band(rate_hz) is None:
+        result.unfiltered_because = (f"at {rate_hz:g} frames/s no band of {MIN_NOISE_BAND_HZ:g} Hz lies above the "
+                                     f"motion's {MOTION_BAND_HZ:g} Hz to measure the noise in")
+        return result
     highest = HIGHEST_CUTOFF * 0.5 * rate_hz
     for k, name in enumerate(names):
-        track = positions[:, k]
+        raw = positions[:, k]
+        leaping = leaps(raw, rate_hz)
+        track = _bridged(raw, leaping)
         runs = _runs(np.all(np.isfinite(track), axis=1))
         if not any(stop - start >= MIN_RUN_FRAMES for start, stop in runs):
             result.keypoints[name] = KeypointFilter(None, None, 0.0, 0.0)
@@ -189,9 +281,9 @@ def filter_targets(names: Sequence[str], positions: np.ndarray, rate_hz: float,
             cutoff, noise = residual_cutoff(track, rate_hz)
         else:
             cutoff, noise = min(float(setting), highest), None
-        filtered = lowpass(track, rate_hz, cutoff)
-        change = np.linalg.norm(filtered - track, axis=1)
+        filtered = np.where(leaping[:, None], raw, lowpass(track, rate_hz, cutoff))
+        change = np.linalg.norm(filtered - raw, axis=1)
         result.positions[:, k] = filtered
         result.keypoints[name] = KeypointFilter(cutoff, noise, float(np.sqrt(np.nanmean(change**2))),
-                                                float(np.nanmax(change)))
+                                                float(np.nanmax(change)), int(leaping.sum()))
     return result
