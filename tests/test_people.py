@@ -15,6 +15,7 @@ import json
 import numpy as np
 import pytest
 
+from ibik_pin.app.people_worker import read_message, write_message
 from ibik_pin.app.video_people import chosen_person, detect_people_in_videos, parse_person
 from ibik_pin.cli import main
 from ibik_pin.exceptions import InputError
@@ -157,6 +158,24 @@ def test_searches_thin_out_while_they_find_nobody_and_come_back_when_people_chan
     for frame in range(6, 9):  # no idle tracker to search: the search stays due
         everyone_followed.update(frame, searched=False, found=False, lost=False)
         assert everyone_followed.due(frame + 1)
+
+
+def test_worker_messages_come_back_whole_and_a_cut_stream_ends_them(tmp_path):
+    people = ViewPeople(np.arange(12.0).reshape(1, 1, 6, 2), np.ones((1, 1, 6)), [CroppedMasks((4, 3))], (4, 3))
+    stream = tmp_path / "messages"
+    with stream.open("wb") as out:
+        write_message(out, ("frames", 3))
+        write_message(out, ("done", 2, people, 0.5, 1.5))
+    data = stream.read_bytes()
+    with stream.open("rb") as back:
+        assert read_message(back) == ("frames", 3)
+        kind, view, returned, decode, detection = read_message(back)
+        assert (kind, view, decode, detection) == ("done", 2, 0.5, 1.5)
+        np.testing.assert_array_equal(returned.keypoints, people.keypoints)
+        assert read_message(back) is None  # the end of the stream
+    stream.write_bytes(data[:-3])  # a worker killed while writing
+    with stream.open("rb") as back:
+        assert read_message(back) == ("frames", 3) and read_message(back) is None
 
 
 def test_person_option_values():

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import os
 import pickle
+import signal
 import struct
 import sys
 import time
@@ -100,6 +101,7 @@ def _without_pyplot() -> None:
 
 
 if __name__ == "__main__":
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to report; it ends this process
     _without_pyplot()
     jobs, settings = pickle.load(sys.stdin.buffer)  # from the parent process, through a private pipe
     with os.fdopen(int(sys.argv[1]), "wb") as pipe:

@@ -213,12 +213,11 @@ def detect_people_in_videos(videos: dict[str, Path], cameras: Sequence, frame_ra
                     else:
                         raise InputError(message[1])
             finally:
+                unfinished = any(view is None for view in views)  # an error or an interruption ended the wait
                 for process in processes:
-                    try:
-                        process.wait(timeout=5.0)
-                    except subprocess.TimeoutExpired:  # still detecting: an error elsewhere ended the run
+                    if unfinished and process.poll() is None:
                         process.kill()
-                        process.wait()
+                    process.wait()
     wall = time.perf_counter() - start
     counts = {name: view.frames for name, view in zip(names, views, strict=True) if view is not None}
     if len(set(counts.values())) > 1:
