@@ -180,31 +180,69 @@ def candidate_cutoffs(rate_hz: float) -> np.ndarray:
     return np.arange(min(LOWEST_CUTOFF_HZ, highest / 4), highest + 1e-9, min(CUTOFF_STEP_HZ, highest / 40))
 
 
-def residual_curve(signal: np.ndarray, rate_hz: float, cutoffs: np.ndarray) -> np.ndarray:
-    """The rms over frames and coordinates of (raw - filtered) at each cutoff, over the filtered runs."""
-    signal = np.asarray(signal, dtype=float)
-    residuals = np.empty(len(cutoffs))
+def _residual_power(signal: np.ndarray, rate_hz: float, cutoffs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per column of the (F, C) signal: the sum over frames of (raw - filtered)^2 at each cutoff,
+    (len(cutoffs), C), and the count of frames summed, (C,). All columns go through each filter
+    call together: one call per cutoff, not one per keypoint and cutoff."""
+    sums = np.empty((len(cutoffs), signal.shape[1]))
+    counts = np.zeros(signal.shape[1])
     for k, cutoff in enumerate(cutoffs):
         change = signal - lowpass(signal, rate_hz, float(cutoff))
-        residuals[k] = np.sqrt(np.nanmean(change**2))
-    return residuals
+        finite = np.isfinite(change)
+        sums[k] = (np.where(finite, change, 0.0) ** 2).sum(axis=0)
+        counts = finite.sum(axis=0)
+    return sums, counts
+
+
+def residual_curve(signal: np.ndarray, rate_hz: float, cutoffs: np.ndarray) -> np.ndarray:
+    """The rms over frames and coordinates of (raw - filtered) at each cutoff, over the filtered runs."""
+    sums, counts = _residual_power(np.asarray(signal, dtype=float), rate_hz, cutoffs)
+    return np.sqrt(sums.sum(axis=1) / max(int(counts.sum()), 1))
+
+
+def _cutoff_from_power(cutoffs: np.ndarray, power: np.ndarray, band: tuple[float, float]) -> tuple[float, float]:
+    """(cutoff, noise rms) from the residual power curve: the noise line fitted over the band's
+    cutoffs; the cutoff minimising the signal removed plus the noise kept (module docstring)."""
+    upper = cutoffs >= band[0] - 1e-9
+    slope, intercept = np.polyfit(cutoffs[upper], power[upper], 1)
+    slope = min(float(slope), 0.0)  # a rising residual is no noise
+    cutoff = float(cutoffs[np.argmin(power - 2.0 * slope * cutoffs)])
+    return cutoff, float(np.sqrt(max(float(intercept), 0.0)))
+
+
+def _check_band(rate_hz: float) -> tuple[float, float]:
+    band = noise_band(rate_hz)
+    if band is None:
+        raise InputError(f"rate_hz: {rate_hz:g} Hz leaves no band above the motion's {MOTION_BAND_HZ:g} Hz to "
+                         "measure the noise in", parameter="rate_hz")
+    return band
 
 
 def residual_cutoff(signal: np.ndarray, rate_hz: float) -> tuple[float, float]:
     """(cutoff [Hz], noise rms per coordinate [signal units]) of the residual analysis on the (F, C)
     signal: the noise line fitted to R^2 at the upper cutoffs; the cutoff that minimises the signal
     removed plus the noise kept (module docstring)."""
-    band = noise_band(rate_hz)
-    if band is None:
-        raise InputError(f"rate_hz: {rate_hz:g} Hz leaves no band above the motion's {MOTION_BAND_HZ:g} Hz to "
-                         "measure the noise in", parameter="rate_hz")
+    band = _check_band(rate_hz)
     cutoffs = candidate_cutoffs(rate_hz)
-    power = residual_curve(signal, rate_hz, cutoffs) ** 2
-    upper = cutoffs >= band[0] - 1e-9
-    slope, intercept = np.polyfit(cutoffs[upper], power[upper], 1)
-    slope = min(float(slope), 0.0)  # a rising residual is no noise
-    cutoff = float(cutoffs[np.argmin(power - 2.0 * slope * cutoffs)])
-    return cutoff, float(np.sqrt(max(float(intercept), 0.0)))
+    return _cutoff_from_power(cutoffs, residual_curve(signal, rate_hz, cutoffs) ** 2, band)
+
+
+def _grouped_cutoffs(tracks: dict[int, np.ndarray], rate_hz: float) -> dict[int, tuple[float, float]]:
+    """residual_cutoff of every (F, 3) track, the tracks with the same missing values filtered in
+    one (F, 3 n) signal per cutoff (a column's filtered values depend on its own column and on
+    which frames are valid, which those tracks share): the same cutoffs, about n times fewer calls."""
+    band = _check_band(rate_hz)
+    cutoffs = candidate_cutoffs(rate_hz)
+    groups: dict[bytes, list[int]] = {}
+    for k, track in tracks.items():
+        groups.setdefault(np.isfinite(track).tobytes(), []).append(k)
+    chosen = {}
+    for members in groups.values():
+        sums, counts = _residual_power(np.concatenate([tracks[k] for k in members], axis=1), rate_hz, cutoffs)
+        for i, k in enumerate(members):
+            power = sums[:, 3 * i:3 * i + 3].sum(axis=1) / max(int(counts[3 * i:3 * i + 3].sum()), 1)
+            chosen[k] = _cutoff_from_power(cutoffs, power, band)
+    return chosen
 
 
 @dataclass
@@ -269,21 +307,26 @@ def filter_targets(names: Sequence[str], positions: np.ndarray, rate_hz: float,
                                      f"motion's {MOTION_BAND_HZ:g} Hz to measure the noise in")
         return result
     highest = HIGHEST_CUTOFF * 0.5 * rate_hz
-    for k, name in enumerate(names):
-        raw = positions[:, k]
-        leaping = leaps(raw, rate_hz)
-        track = _bridged(raw, leaping)
+    raws, leaping, tracks, done = {}, {}, {}, {}
+    for k in range(len(names)):
+        raws[k] = positions[:, k]
+        leaping[k] = leaps(raws[k], rate_hz)
+        track = _bridged(raws[k], leaping[k])
         runs = _runs(np.all(np.isfinite(track), axis=1))
         if not any(stop - start >= MIN_RUN_FRAMES for start, stop in runs):
-            result.keypoints[name] = KeypointFilter(None, None, 0.0, 0.0)
+            done[k] = KeypointFilter(None, None, 0.0, 0.0)
             continue
-        if setting == "auto":
-            cutoff, noise = residual_cutoff(track, rate_hz)
-        else:
-            cutoff, noise = min(float(setting), highest), None
-        filtered = np.where(leaping[:, None], raw, lowpass(track, rate_hz, cutoff))
-        change = np.linalg.norm(filtered - raw, axis=1)
+        tracks[k] = track
+    if setting == "auto":
+        chosen = _grouped_cutoffs(tracks, rate_hz)
+    else:
+        chosen = {k: (min(float(setting), highest), None) for k in tracks}
+    for k, track in tracks.items():
+        cutoff, noise = chosen[k]
+        filtered = np.where(leaping[k][:, None], raws[k], lowpass(track, rate_hz, cutoff))
+        change = np.linalg.norm(filtered - raws[k], axis=1)
         result.positions[:, k] = filtered
-        result.keypoints[name] = KeypointFilter(cutoff, noise, float(np.sqrt(np.nanmean(change**2))),
-                                                float(np.nanmax(change)), int(leaping.sum()))
+        done[k] = KeypointFilter(cutoff, noise, float(np.sqrt(np.nanmean(change**2))),
+                                 float(np.nanmax(change)), int(leaping[k].sum()))
+    result.keypoints = {names[k]: done[k] for k in sorted(done)}
     return result
