@@ -317,8 +317,9 @@ def filter_targets(names: Sequence[str], positions: np.ndarray, rate_hz: float,
             done[k] = KeypointFilter(None, None, 0.0, 0.0)
             continue
         tracks[k] = track
+    chosen: dict[int, tuple[float, float | None]]
     if setting == "auto":
-        chosen = _grouped_cutoffs(tracks, rate_hz)
+        chosen = dict(_grouped_cutoffs(tracks, rate_hz))
     else:
         chosen = {k: (min(float(setting), highest), None) for k in tracks}
     for k, track in tracks.items():
