@@ -111,7 +111,7 @@ def main(argv: list[str] | None = None) -> dict:
                   else Path(tempfile.mkdtemp(prefix=f"sweep_{index:03d}_")))
         try:
             rendering = time.perf_counter()
-            inputs = load_condition(condition, folder) if arguments.keep else None
+            inputs = load_condition(condition, folder, tuple(silhouettes)) if arguments.keep else None
             if inputs is None or inputs.truth.shape[0] != arguments.frames:
                 inputs = write_condition(condition, arguments.data, arguments.frames, arguments.rate, folder,
                                          tuple(silhouettes))

@@ -237,9 +237,13 @@ def write_condition(condition: Condition, data: Path, frames: int, rate: float, 
     return inputs
 
 
-def load_condition(condition: Condition, folder: Path) -> ConditionInputs | None:
+def load_condition(condition: Condition, folder: Path,
+                   silhouettes: tuple[str, ...] = ()) -> ConditionInputs | None:
     """The condition's files written earlier into `folder` by :func:`write_condition` for the same
-    draw, or None when they are not there (or were written for another draw)."""
+    draw, or None when they are not there (or were written for another draw, or without one of
+    the `silhouettes` asked for now)."""
+    if not all((folder / "masks" / kind).is_dir() for kind in silhouettes):
+        return None
     try:
         written = json.loads((folder / "condition.json").read_text())
         truth = np.load(folder / "truth.npz")
