@@ -93,6 +93,8 @@ def main() -> None:
                         metavar="VALUES",
                         help="ibik track --target-filter values, comma-separated (default: ibik track's); with "
                              "several, each one's tables and runs go to <out>/filter_<value>/")
+    parser.add_argument("--trial-lengths", choices=("off", "reach", "images"), default=None,
+                        help="ibik track --trial-lengths for every run (default: ibik track's)")
     parser.add_argument("--quick", action="store_true",
                         help="40 frames, cmu35_01 and boxing_a, IK, PIK and IBIK 2v (explicit flags win)")
     parser.add_argument("--quiet", action="store_true", help="print only the tables' path and the wall time")
@@ -143,7 +145,7 @@ def main() -> None:
                     count += 1
                     result = run_variant(inputs, chosen, condition, overrides,
                                          outs[target_filter] / "runs" / clip / condition / chosen.name, drop_targets,
-                                         target_filter=target_filter)
+                                         target_filter=target_filter, trial_lengths=arguments.trial_lengths)
                     results[target_filter].append(result)
                     errors = result.joint_errors_mm
                     residual = sum(result.residuals_mm.values()) / len(result.residuals_mm)

@@ -76,11 +76,12 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
                              "next, ...; report.json's people lists them), or all (each into OUT/person_N)")
     parser.add_argument("--cameras", help="comma-separated subset of the calibration's cameras")
     parser.add_argument("--model", help="URDF of the human (default: example-robot-data's)")
-    parser.add_argument("--trial-lengths", choices=("off", "reach", "images"), default="off",
+    parser.add_argument("--trial-lengths", choices=("off", "reach", "images"), default="images",
                         help="reach: lengthen a limb whose calibrated segments cannot reach its targets on this "
                              "trial (joint centres from markers are not rigid across takes); images: each leg's "
                              "length chosen on the silhouettes (two views or more), the arms by reach; "
-                             "report.json gives each segment's change (default: off)")
+                             "report.json gives each segment's change (default: images; with fewer than two views "
+                             "or --no-image, reach)")
     parser.add_argument("--target-filter", default="auto", metavar="auto|off|HZ",
                         help="low-pass each target keypoint over time (zero-lag 4th-order Butterworth): auto "
                              "chooses each keypoint's cutoff from the trial's residual analysis, a number is the "

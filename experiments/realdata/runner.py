@@ -194,8 +194,9 @@ class RunResult:
 
 def run_variant(inputs: ClipInputs, chosen: Variant, condition: str, overrides: dict | None = None,
                 out: Path | None = None, drop_targets: typing.Sequence[str] = (),
-                target_filter: str | float | None = None) -> RunResult:
-    """``ibik track`` on the clip's files as a user runs it.
+                target_filter: str | float | None = None, trial_lengths: str | None = None) -> RunResult:
+    """``ibik track`` on the clip's files as a user runs it (`target_filter`, `trial_lengths`: its
+    options of those names; None: its defaults).
 
     Args:
         out: where its outputs go (None: a temporary folder, removed afterwards).
@@ -228,6 +229,7 @@ def run_variant(inputs: ClipInputs, chosen: Variant, condition: str, overrides: 
         cameras=inputs.cameras[:chosen.views] if chosen.views else None,
         settings=tracking_settings(chosen, condition, overrides), quiet=True,
         **({} if target_filter is None else {"target_filter": target_filter}),
+        **({} if trial_lengths is None else {"trial_lengths": trial_lengths}),
     )
     started = time.perf_counter()
     try:

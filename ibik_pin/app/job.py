@@ -84,7 +84,7 @@ class TrackJob:
     triangulated_limbs: bool = False
     refit_cameras: list[str] | None = None
     c3d_mapping: Path | None = None
-    trial_lengths: str = "off"
+    trial_lengths: str = "images"
     person: str | int = "auto"
     target_filter: str | float = "auto"
 
