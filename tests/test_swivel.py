@@ -136,14 +136,20 @@ class _Towards:
     values_at_moves = SegmentCriterion.values_at_moves  # each move through values_at
 
 
-def test_a_hint_needs_every_term_to_agree(human):
+def _bent_left_arm(human, shoulder_x: float):
+    """The neutral pose with the left shoulder raised by `shoulder_x` [rad] and the elbow bent 1.3 rad:
+    its configuration and the shoulder, elbow and wrist."""
     import pinocchio as pin
 
     q = pin.neutral(human.model)
-    for joint, angle in [("left_shoulder_X", 1.2), ("left_elbow_Z", 1.3)]:
+    for joint, angle in [("left_shoulder_X", shoulder_x), ("left_elbow_Z", 1.3)]:
         q[human.model.joints[human.model.getJointId(joint)].idx_q] = angle
     configuration = Configuration(human.model, q)
-    shoulder, elbow, wrist = configuration.frame_positions(human.frame_ids(["LShoulder", "LElbow", "LWrist"]))
+    return configuration, configuration.frame_positions(human.frame_ids(["LShoulder", "LElbow", "LWrist"]))
+
+
+def test_a_hint_needs_every_term_to_agree(human):
+    configuration, (shoulder, elbow, wrist) = _bent_left_arm(human, 1.2)
     across = swivel_circle(shoulder, elbow, wrist, 2)[1]  # the far side of the circle
     pulling = _Towards(human, across)
     assert "LElbow" in SwivelSearch(human, [(pulling, 3.0)]).hints(configuration, ["LElbow"])
@@ -359,13 +365,7 @@ def test_outside_counts_count_each_segments_points_outside():
 
 
 def _arm_beside_the_trunk(human):
-    import pinocchio as pin
-
-    q = pin.neutral(human.model)
-    for joint, angle in [("left_shoulder_X", 0.3), ("left_elbow_Z", 1.3)]:
-        q[human.model.joints[human.model.getJointId(joint)].idx_q] = angle
-    configuration = Configuration(human.model, q)
-    shoulder, elbow, wrist = configuration.frame_positions(human.frame_ids(["LShoulder", "LElbow", "LWrist"]))
+    configuration, (shoulder, elbow, wrist) = _bent_left_arm(human, 0.3)
     trunk = configuration.frame_positions(human.frame_ids(["Hip", "Neck", "LShoulder", "RShoulder"]))
     circle = swivel_circle(shoulder, elbow, wrist, 72)
     distance, _ = trunk_distance(circle, *trunk)
