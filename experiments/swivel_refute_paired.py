@@ -31,7 +31,7 @@ from ibik_pin.tracking import tracker as tracker_module
 from ibik_pin.tracking.swivel import SwivelSearch
 
 JOINTS = ("LElbow", "RElbow", "LKnee", "RKnee")
-#: The swivel search before issue 41: every limb hinted, the trunk's section symmetric.
+#: The swivel search before the refutation rule: every limb hinted, the trunk's section symmetric.
 EARLIER = {"keep_unrefuted": False, "trunk_section": [0.75, 0.6]}
 
 
