@@ -30,6 +30,11 @@ __all__ = ["refine_lengths_on_images"]
 
 LEGS = ("left_leg", "right_leg")
 ARMS = ("left_arm", "right_arm")
+# The legs' factor is chosen on at most this many frames, spread evenly over the trial: the sweep
+# that decided this refinement chose it on windows of 40 frames (docs/sweep.md), and every frame
+# more costs its support images and a grid of swivel searches (120 frames of the demo, 4 views:
+# about 2 s against 1.2 s for the whole solve).
+MOST_FRAMES = 40
 
 
 def refine_lengths_on_images(body: BodyModel, names: list[str], targets_m: np.ndarray, cameras: Sequence,
@@ -53,8 +58,11 @@ def refine_lengths_on_images(body: BodyModel, names: list[str], targets_m: np.nd
     image_task = ImageTask(body, samples_per_segment=settings.samples_per_segment)
     axis_task = SilhouetteAxisTask(body)
 
+    count = first_pass.keypoints.shape[0]
+    sampled = np.unique(np.linspace(0, count - 1, min(count, MOST_FRAMES)).round().astype(int))
+
     def frames() -> Iterator:
-        for frame in range(first_pass.keypoints.shape[0]):
+        for frame in sampled:
             if not np.all(np.isfinite(first_pass.keypoints[frame])):
                 continue
             images = frame_images(masks_of_frame, cameras, caps, scales, frame)
