@@ -11,11 +11,13 @@ sees no depth: with fewer than two cameras the legs too go by reach. This is wha
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import replace
 
 import numpy as np
 
+from ibik_pin.exceptions import IbikWarning
 from ibik_pin.model import BodyModel
 from ibik_pin.readahead.frame_images import frame_images
 from ibik_pin.subject.scaling import keypoint_lengths
@@ -51,7 +53,9 @@ def refine_lengths_on_images(body: BodyModel, names: list[str], targets_m: np.nd
     lengths = keypoint_lengths(body)
     if len(cameras) < 2:
         return refine_from_reach(lengths, names, targets_m)
-    first_pass = Tracker(body, [], replace(settings, use_image=False)).track(names, targets_m)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", IbikWarning)
+        first_pass = Tracker(body, [], replace(settings, use_image=False)).track(names, targets_m)
     centre = np.nanmean(targets_m.reshape(-1, 3), axis=0)
     caps = support_caps(cameras, centre)
     scales = support_caps(cameras, centre, settings.axis_scale)
@@ -71,7 +75,11 @@ def refine_lengths_on_images(body: BodyModel, names: list[str], targets_m: np.nd
             keypoints = {name: first_pass.keypoints[frame, k] for k, name in enumerate(first_pass.keypoint_names)}
             yield keypoints, [(image_task, 1.0), (axis_task, settings.axis_weight)]
 
-    legs = refine_from_images(body, lengths, frames(), limbs=LEGS, keep_ratio=True)
+    # The run's own solve reads the same targets and silhouettes next and says what is wrong with
+    # them, once per cause: said here too, each frame's empty view would be said again and again.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", IbikWarning)
+        legs = refine_from_images(body, lengths, frames(), limbs=LEGS, keep_ratio=True)
     arms = refine_from_reach(lengths, names, targets_m, limbs=ARMS)
     refined = dict(lengths)
     for limb_lengths in (legs, arms):
