@@ -32,6 +32,7 @@ from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.tasks.segments import SegmentCriterion
+from ibik_pin.tracking.arm_support import ARM_CAP, cap_arm_overlap, outside_counts
 from ibik_pin.tracking.trunk import TRUNK_KEYPOINTS, TRUNK_SECTION, inside_trunk, trunk_distance
 from ibik_pin.tracking.views import LIMB_HALF_WIDTH
 
@@ -128,29 +129,6 @@ def swivel_circle(root: np.ndarray, middle: np.ndarray, end: np.ndarray, count: 
 #: symmetric section instead, walk131_01's right elbow (sweep condition 3, 2 views) kept 25.4 mm
 #: where this gives 15.6 (the earlier rule 25.1).
 NEARER_SECTION = (0.75, 1.2, 0.6)
-#: Points sampled on each of a limb's two segments to count where it leaves the silhouettes.
-REFUTE_SAMPLES = 6
-
-
-def outside_counts(inside_silhouettes: Callable[[np.ndarray], np.ndarray], roots: np.ndarray,
-                   middles: np.ndarray, ends: np.ndarray, samples: int = REFUTE_SAMPLES) -> np.ndarray:
-    """How many of a limb's points lie outside the silhouettes (in some view), for limbs (L, 3)
-    with their middle joints at `middles` (L, 3) or at candidates (L, C, 3): shape (L,) or (L, C).
-    The points: `samples` on each segment, root-middle and middle-end, at the centres of equal parts."""
-    middles = np.asarray(middles, dtype=float)
-    single = middles.ndim == 2
-    placed = middles[:, None] if single else middles
-    fractions = (np.arange(samples) + 0.5) / samples
-    root = np.broadcast_to(roots[:, None, None], (*placed.shape[:2], 1, 3))
-    end = np.broadcast_to(ends[:, None, None], (*placed.shape[:2], 1, 3))
-    middle = placed[:, :, None]
-    points = np.concatenate([root + fractions[:, None] * (middle - root),
-                             middle + fractions[:, None] * (end - middle)], axis=2)  # (L, C, 2 samples, 3)
-    outside = ~inside_silhouettes(points.reshape(-1, 3)).reshape(points.shape[:3])
-    counts = outside.sum(axis=2)
-    return counts[:, 0] if single else counts
-
-
 def _distances_to_lines(points: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
     """Distances [m] of points (L, 3) to the lines through starts and ends (L, 3) (to the start
     where the two coincide), shape (L,)."""
@@ -210,6 +188,9 @@ class SwivelSearch:
             so the criterion prefers an arm laid over or in front of the trunk wherever both views
             see it there. On jumps (2 views, clean) such hints put right elbows 50 mm off on
             average where the prior's were 16-18 (docs/method.md, "Elbows the image made worse than no image").
+        arm_cap: an elbow's candidates read the image task's overlap of the arm no deeper than this
+            [m] (tracking.arm_support): the body-wide cap rewards an arm over the trunk more than on
+            its own thinner silhouette. None: the image task's values.
     """
 
     body: BodyModel
@@ -223,12 +204,15 @@ class SwivelSearch:
     trunk_section: tuple[float, ...] | None = TRUNK_SECTION
     keep_unrefuted: bool = True
     nearer_section: tuple[float, ...] = NEARER_SECTION
+    arm_cap: float | None = ARM_CAP
 
     def __post_init__(self) -> None:
         if int(self.samples) < 3:
             raise InputError(f"samples: expected at least 3 points on a swivel circle, found {self.samples}")
         if int(self.refine) < 0:
             raise InputError(f"refine: expected a number of points >= 0, found {self.refine}")
+        if self.arm_cap is not None and not float(self.arm_cap) > 0.0:
+            raise InputError(f"arm_cap: expected a depth > 0 [m] or None, found {self.arm_cap}", parameter="arm_cap")
         self._limb_ids: dict[str, np.ndarray] = {}
         self._term_rows: dict[tuple[SegmentCriterion, int], np.ndarray] = {}
         self._trunk_ids = (self.body.frame_ids(list(TRUNK_KEYPOINTS))
@@ -340,6 +324,12 @@ class SwivelSearch:
             poses.append((current, task.at_pose(current)))
         weighted, present = self._weighted(poses, limb_ids[chosen, 1], circles)
         elbows = np.array([limbs[limb] in ("LElbow", "RElbow") for limb in chosen])
+        arm_cap = self.arm_cap
+        if arm_cap is not None:
+            arms = np.flatnonzero(elbows)
+            capped = weighted[:, arms]
+            cap_arm_overlap(self.terms, capped, roots[chosen[arms]], circles[arms], ends[chosen[arms]], arm_cap)
+            weighted[:, arms] = capped
         forbidden = self._inside_trunk(configuration, elbows, circles)
         if self.refine:
             # Then around each limb's best sample, within one spacing of it on either side.
@@ -360,6 +350,11 @@ class SwivelSearch:
             finer_weighted = np.zeros((*weighted.shape[:2], finer.shape[1]))
             if scored.any():
                 finer_weighted[:, scored] = self._weighted(poses, limb_ids[chosen[scored], 1], finer[scored])[0]
+            arms = np.flatnonzero(scored & elbows)
+            if arm_cap is not None and arms.size:
+                capped = finer_weighted[:, arms]
+                cap_arm_overlap(self.terms, capped, roots[chosen[arms]], finer[arms], ends[chosen[arms]], arm_cap)
+                finer_weighted[:, arms] = capped
             finer_forbidden[~scored] = True
             circles = np.concatenate([circles, finer], axis=1)
             weighted = np.concatenate([weighted, finer_weighted], axis=2)
