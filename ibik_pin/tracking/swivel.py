@@ -241,6 +241,18 @@ class SwivelSearch:
         towards[elbows] = distance[:, 1] < distance[:, 0]
         return towards
 
+    def _away_from_trunk(self, configuration: Configuration, elbows: np.ndarray, middles: np.ndarray,
+                         picked: np.ndarray) -> np.ndarray:
+        """Which of the flagged elbows (L,) would `picked` (L, 3) take farther from the trunk's axis
+        (nearer_section) than where it is (middles (L, 3))."""
+        away = np.zeros(len(elbows), dtype=bool)
+        if self._trunk_ids is None or not elbows.any():
+            return away
+        distance, _ = trunk_distance(np.stack([middles[elbows], picked[elbows]], axis=1),
+                                     *configuration.frame_positions(self._trunk_ids), self.nearer_section)
+        away[elbows] = distance[:, 1] > distance[:, 0]
+        return away
+
     def _least_refuted(self, roots: np.ndarray, circles: np.ndarray, ends: np.ndarray,
                        forbidden: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """For limbs (L, 3) whose candidates are `circles` (L, C, 3), sample 0 where the joint is: the
@@ -325,12 +337,21 @@ class SwivelSearch:
         weighted, present = self._weighted(poses, limb_ids[chosen, 1], circles)
         elbows = np.array([limbs[limb] in ("LElbow", "RElbow") for limb in chosen])
         arm_cap = self.arm_cap
-        if arm_cap is not None:
+        forbidden = self._inside_trunk(configuration, elbows, circles)
+        if arm_cap is not None and elbows.any():
+            # An elbow reads its arm's own overlap where the image task's best swivel lies nearer the
+            # trunk's axis than that reading's: there the body-wide cap's preference may be the trunk.
             arms = np.flatnonzero(elbows)
             capped = weighted[:, arms]
             cap_arm_overlap(self.terms, capped, roots[chosen[arms]], circles[arms], ends[chosen[arms]], arm_cap)
-            weighted[:, arms] = capped
-        forbidden = self._inside_trunk(configuration, elbows, circles)
+            picks = [np.argmax(np.where(forbidden[arms], -np.inf, terms.sum(axis=0)), axis=1)
+                     for terms in (weighted[:, arms], capped)]
+            trunkward = self._away_from_trunk(configuration, np.ones(arms.size, dtype=bool), *(
+                circles[arms, pick] for pick in picks))
+            arms = arms[trunkward]
+            weighted[:, arms] = capped[:, trunkward]
+        else:
+            arms = np.zeros(0, dtype=int)
         if self.refine:
             # Then around each limb's best sample, within one spacing of it on either side.
             best = np.argmax(np.where(forbidden, -np.inf, weighted.sum(axis=0)), axis=1)
@@ -350,7 +371,7 @@ class SwivelSearch:
             finer_weighted = np.zeros((*weighted.shape[:2], finer.shape[1]))
             if scored.any():
                 finer_weighted[:, scored] = self._weighted(poses, limb_ids[chosen[scored], 1], finer[scored])[0]
-            arms = np.flatnonzero(scored & elbows)
+            arms = arms[scored[arms]]
             if arm_cap is not None and arms.size:
                 capped = finer_weighted[:, arms]
                 cap_arm_overlap(self.terms, capped, roots[chosen[arms]], finer[arms], ends[chosen[arms]], arm_cap)
