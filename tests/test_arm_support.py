@@ -10,6 +10,7 @@ from ibik_pin.tasks import ImageTask, View
 from ibik_pin.tasks.silhouette_axis import AxisView, SilhouetteAxisTask
 from ibik_pin.tracking.arm_support import arm_overlap
 from ibik_pin.tracking.swivel import SwivelSearch, swivel_circle
+from ibik_pin.tracking.trunk import farther_from_axis
 from ibik_pin.tracking.views import LIMB_HALF_WIDTH
 from ibik_pin.vision.medial_axis import medial_axis_pixels
 from ibik_pin.vision.pinhole import look_at_camera
@@ -107,3 +108,16 @@ def test_the_arms_cap_leaves_the_knees_hints_and_must_be_a_depth(human):
     assert np.linalg.norm(hints["LElbow"] - elbow) < 0.05
     with pytest.raises(InputError, match="arm_cap"):
         SwivelSearch(human, terms, arm_cap=0.0)
+
+
+def test_farther_from_the_trunks_axis_compares_each_pair_in_the_section():
+    hip, neck = np.zeros(3), np.array([0.0, 0.5, 0.0])
+    left, right = np.array([0.0, 0.35, -0.19]), np.array([0.0, 0.35, 0.19])  # facing +x, Y up
+    starts = np.array([[0.0, 0.2, -0.2], [0.15, 0.2, 0.0]])
+    # Beside the trunk, then 0.1 m farther out; in front of the chest, then the same depth behind
+    # it, which counts more with a shallower back (0.6 against 1.2 half shoulder widths).
+    ends = np.array([[0.0, 0.2, -0.3], [-0.15, 0.2, 0.0]])
+    np.testing.assert_array_equal(farther_from_axis(starts, ends, hip, neck, left, right, (0.75, 1.2, 0.6)),
+                                  [True, True])
+    np.testing.assert_array_equal(farther_from_axis(ends, starts, hip, neck, left, right, (0.75, 1.2, 0.6)),
+                                  [False, False])

@@ -13,7 +13,10 @@ peaked 3-50 degrees off.
 
 Read no deeper than `ARM_CAP`, every swivel whose arm lies well inside the silhouettes scores the
 same on the overlap, over the trunk or on the arm's own silhouette; the overlap keeps telling a
-swivel that leaves the silhouettes, and the axis term chooses among the rest.
+swivel that leaves the silhouettes, and the axis term chooses among the rest. The swivel search
+(tracking.swivel.SwivelSearch.arm_cap) reads it only where the body-wide overlap's choice lies
+nearer the trunk: a hanging arm's swivels all lie inside the silhouettes, and there the axis term
+alone is no guide.
 """
 
 from __future__ import annotations
@@ -26,8 +29,8 @@ from ibik_pin.tasks.image import ImageTask, support_at
 
 __all__ = ["ARM_CAP", "REFUTE_SAMPLES", "arm_overlap", "cap_arm_overlap", "outside_counts"]
 
-#: Depth [m] at which an arm's support is read full (the sweep's subset, docs/sweep.md: 20 mm put the
-#: criterion's best swivel nearest the truth among 10, 20 and 30 mm).
+#: Depth [m] at which an arm's support is read full (docs/sweep.md: among 10, 20 and 30 mm, 20 put the
+#: criterion's best swivel nearest the truth on the tail's elbows).
 ARM_CAP = 0.02
 
 

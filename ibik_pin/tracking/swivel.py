@@ -33,7 +33,7 @@ from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.tasks.segments import SegmentCriterion
 from ibik_pin.tracking.arm_support import ARM_CAP, cap_arm_overlap, outside_counts
-from ibik_pin.tracking.trunk import TRUNK_KEYPOINTS, TRUNK_SECTION, inside_trunk, trunk_distance
+from ibik_pin.tracking.trunk import TRUNK_KEYPOINTS, TRUNK_SECTION, farther_from_axis, inside_trunk, trunk_distance
 from ibik_pin.tracking.views import LIMB_HALF_WIDTH
 
 __all__ = ["LIMB_ENDS", "TRUNK_SECTION", "SwivelSearch", "inside_trunk", "outside_counts", "swivel_circle",
@@ -188,9 +188,12 @@ class SwivelSearch:
             so the criterion prefers an arm laid over or in front of the trunk wherever both views
             see it there. On jumps (2 views, clean) such hints put right elbows 50 mm off on
             average where the prior's were 16-18 (docs/method.md, "Elbows the image made worse than no image").
-        arm_cap: an elbow's candidates read the image task's overlap of the arm no deeper than this
-            [m] (tracking.arm_support): the body-wide cap rewards an arm over the trunk more than on
-            its own thinner silhouette. None: the image task's values.
+        arm_cap: an elbow whose best sample on the terms lies nearer the trunk's axis (nearer_section)
+            than its best with the image task's overlap of the arm read no deeper than this [m]
+            (tracking.arm_support) is searched on the latter: the body-wide cap rewards an arm over
+            the trunk more than on its own thinner silhouette. Everywhere instead, walking elbows
+            that the body-wide overlap had kept went where the silhouette-axis term alone put them
+            (docs/sweep.md, "The elbows' tail"). None: the image task's values.
     """
 
     body: BodyModel
@@ -240,18 +243,6 @@ class SwivelSearch:
                                      right_shoulder, self.nearer_section)
         towards[elbows] = distance[:, 1] < distance[:, 0]
         return towards
-
-    def _away_from_trunk(self, configuration: Configuration, elbows: np.ndarray, middles: np.ndarray,
-                         picked: np.ndarray) -> np.ndarray:
-        """Which of the flagged elbows (L,) would `picked` (L, 3) take farther from the trunk's axis
-        (nearer_section) than where it is (middles (L, 3))."""
-        away = np.zeros(len(elbows), dtype=bool)
-        if self._trunk_ids is None or not elbows.any():
-            return away
-        distance, _ = trunk_distance(np.stack([middles[elbows], picked[elbows]], axis=1),
-                                     *configuration.frame_positions(self._trunk_ids), self.nearer_section)
-        away[elbows] = distance[:, 1] > distance[:, 0]
-        return away
 
     def _least_refuted(self, roots: np.ndarray, circles: np.ndarray, ends: np.ndarray,
                        forbidden: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -346,8 +337,9 @@ class SwivelSearch:
             cap_arm_overlap(self.terms, capped, roots[chosen[arms]], circles[arms], ends[chosen[arms]], arm_cap)
             picks = [np.argmax(np.where(forbidden[arms], -np.inf, terms.sum(axis=0)), axis=1)
                      for terms in (weighted[:, arms], capped)]
-            trunkward = self._away_from_trunk(configuration, np.ones(arms.size, dtype=bool), *(
-                circles[arms, pick] for pick in picks))
+            trunkward = (np.zeros(arms.size, dtype=bool) if self._trunk_ids is None else farther_from_axis(
+                *(circles[arms, pick] for pick in picks), *configuration.frame_positions(self._trunk_ids),
+                self.nearer_section))
             arms = arms[trunkward]
             weighted[:, arms] = capped[:, trunkward]
         else:
