@@ -335,11 +335,11 @@ class SwivelSearch:
             arms = np.flatnonzero(elbows)
             capped = weighted[:, arms]
             cap_arm_overlap(self.terms, capped, roots[chosen[arms]], circles[arms], ends[chosen[arms]], arm_cap)
-            picks = [np.argmax(np.where(forbidden[arms], -np.inf, terms.sum(axis=0)), axis=1)
-                     for terms in (weighted[:, arms], capped)]
-            trunkward = (np.zeros(arms.size, dtype=bool) if self._trunk_ids is None else farther_from_axis(
-                *(circles[arms, pick] for pick in picks), *configuration.frame_positions(self._trunk_ids),
-                self.nearer_section))
+            body_wide, own = (circles[arms, np.argmax(np.where(forbidden[arms], -np.inf, terms.sum(axis=0)), axis=1)]
+                              for terms in (weighted[:, arms], capped))
+            trunk = configuration.frame_positions(self._trunk_ids) if self._trunk_ids is not None else None
+            trunkward = (np.zeros(arms.size, dtype=bool) if trunk is None else
+                         farther_from_axis(body_wide, own, trunk[0], trunk[1], trunk[2], trunk[3], self.nearer_section))
             arms = arms[trunkward]
             weighted[:, arms] = capped[:, trunkward]
         else:
