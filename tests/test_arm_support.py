@@ -8,7 +8,7 @@ from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError
 from ibik_pin.tasks import ImageTask, View
 from ibik_pin.tasks.silhouette_axis import AxisView, SilhouetteAxisTask
-from ibik_pin.tracking.arm_support import arm_overlap
+from ibik_pin.tracking.arm_support import ARM_CAP, arm_overlap
 from ibik_pin.tracking.swivel import SwivelSearch, swivel_circle
 from ibik_pin.tracking.trunk import farther_from_axis
 from ibik_pin.tracking.views import LIMB_HALF_WIDTH
@@ -95,15 +95,15 @@ def test_the_arms_cap_leaves_the_knees_hints_and_must_be_a_depth(human):
             return positions
 
     terms = [(image, 1.0), (axis, 1.0)]
-    capped = SwivelSearch(human, terms, inside_silhouettes=image.inside_silhouettes)
-    uncapped = SwivelSearch(human, terms, inside_silhouettes=image.inside_silhouettes, arm_cap=None)
+    capped = SwivelSearch(human, terms, inside_silhouettes=image.inside_silhouettes, arm_cap=ARM_CAP)
+    uncapped = SwivelSearch(human, terms, inside_silhouettes=image.inside_silhouettes)
     hints, earlier = (search.hints(Swivelled(), ["LKnee", "LElbow"]) for search in (capped, uncapped))
     knee = configuration.frame_position(human.frame_id("LKnee"))
     assert np.linalg.norm(hints["LKnee"] - knee) < 0.03
     np.testing.assert_array_equal(hints["LKnee"], earlier["LKnee"])
     elbow = configuration.frame_position(human.frame_id("LElbow"))
-    # The elbow, 130 mm off, hinted back on the capped overlap and the axis term (44 mm here; the
-    # samples' spacing on a 170-mm circle and the axis term's 8-px scale).
+    # The elbow, 130 mm off, hinted back (44 mm here; the samples' spacing on a 170-mm circle and
+    # the axis term's 8-px scale).
     assert np.linalg.norm(wrong[human.frame_id("LElbow")] - elbow) > 0.12
     assert np.linalg.norm(hints["LElbow"] - elbow) < 0.05
     with pytest.raises(InputError, match="arm_cap"):

@@ -32,7 +32,7 @@ from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.tasks.segments import SegmentCriterion
-from ibik_pin.tracking.arm_support import ARM_CAP, cap_arm_overlap, outside_counts
+from ibik_pin.tracking.arm_support import cap_arm_overlap, outside_counts
 from ibik_pin.tracking.trunk import TRUNK_KEYPOINTS, TRUNK_SECTION, farther_from_axis, inside_trunk, trunk_distance
 from ibik_pin.tracking.views import LIMB_HALF_WIDTH
 
@@ -193,7 +193,9 @@ class SwivelSearch:
             (tracking.arm_support) is searched on the latter: the body-wide cap rewards an arm over
             the trunk more than on its own thinner silhouette. Everywhere instead, walking elbows
             that the body-wide overlap had kept went where the silhouette-axis term alone put them
-            (docs/sweep.md, "The elbows' tail"). None: the image task's values.
+            (docs/sweep.md, "The elbows' tail"). None (default): the image task's values; the 2-view
+            sweep with tracking.arm_support.ARM_CAP improved the elbows' tail but lost 8-13 mm on
+            walk131_01's hanging arms (docs/sweep.md), so it is not the default.
     """
 
     body: BodyModel
@@ -207,7 +209,7 @@ class SwivelSearch:
     trunk_section: tuple[float, ...] | None = TRUNK_SECTION
     keep_unrefuted: bool = True
     nearer_section: tuple[float, ...] = NEARER_SECTION
-    arm_cap: float | None = ARM_CAP
+    arm_cap: float | None = None
 
     def __post_init__(self) -> None:
         if int(self.samples) < 3:
