@@ -1,7 +1,7 @@
 """The swivel search's refutation rule, paired: IBIK 2 views with and without it on kept sweep conditions.
 
 Runs ``ibik track`` (sweepkit.runs.run_condition_variant) on the files ``sweep.py --keep`` wrote,
-with each condition's trial-refined static (static_images2v_<silhouettes>.trc, as the sweep's
+with each condition's trial-refined static (static_images2v_<silhouettes>[_<filter>].trc, as the sweep's
 ``--lengths images``), once with the tracker's swivel search as it is (SwivelSearch.keep_unrefuted:
 a limb the silhouettes do not refute gets no hint) and once hinting every limb as before. Same
 inputs, same process: the difference is the rule alone. Prints and writes each run's mean error
@@ -43,11 +43,13 @@ def _indices(text: str) -> list[int]:
     return chosen
 
 
-def run(inputs, kind: str, search: dict) -> dict:
+def run(inputs, kind: str, search: dict, target_filter: str = "auto") -> dict:
     tracker_module.SwivelSearch = functools.partial(SwivelSearch, **search)  # type: ignore[misc]
     try:
-        static = inputs.folder / f"static_images2v_{kind}.trc"
-        result = run_condition_variant(inputs, "ibik2v", kind, None, static if static.exists() else None)
+        suffix = "" if target_filter == "off" else f"_{target_filter}"  # sweepkit.lengths.image_static's name
+        static = inputs.folder / f"static_images2v_{kind}{suffix}.trc"
+        result = run_condition_variant(inputs, "ibik2v", kind, None, static if static.exists() else None,
+                                       target_filter)
     finally:
         tracker_module.SwivelSearch = SwivelSearch  # type: ignore[misc]
     return {joint: float(np.mean(result.errors[:, k]) * 1e3) for k, joint in enumerate(JOINTS)}
@@ -76,6 +78,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--conditions", default="0-13", help="indices, e.g. 0-13 or 8,22,36")
     parser.add_argument("--silhouettes", default="clean,defects")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--target-filter", default="auto", help="ibik track --target-filter (default: the sweep's)")
     parser.add_argument("--out", type=Path, default=None)
     parser.add_argument("--before", type=json.loads, default=EARLIER,
                         help="SwivelSearch fields of the earlier run, JSON (default: %(default)s)")
@@ -94,7 +97,8 @@ def main(argv: list[str] | None = None) -> None:
         if inputs is None:
             raise SystemExit(f"condition {index}: no kept files under {arguments.keep}; run sweep.py --keep first")
         for kind in arguments.silhouettes.split(","):
-            before, after = run(inputs, kind, arguments.before), run(inputs, kind, arguments.after)
+            before, after = (run(inputs, kind, search, arguments.target_filter)
+                             for search in (arguments.before, arguments.after))
             rows.append({"index": index, "motion": condition.motion, "silhouettes": kind, "before": before,
                          "after": after})
             print(f"{index:3d} {condition.motion:15s} {kind:7s} " + "  ".join(

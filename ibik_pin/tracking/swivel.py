@@ -32,7 +32,8 @@ from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.tasks.segments import SegmentCriterion
-from ibik_pin.tracking.trunk import TRUNK_KEYPOINTS, TRUNK_SECTION, inside_trunk, trunk_distance
+from ibik_pin.tracking.arm_support import cap_arm_overlap, outside_counts
+from ibik_pin.tracking.trunk import TRUNK_KEYPOINTS, TRUNK_SECTION, farther_from_axis, inside_trunk, trunk_distance
 from ibik_pin.tracking.views import LIMB_HALF_WIDTH
 
 __all__ = ["LIMB_ENDS", "TRUNK_SECTION", "SwivelSearch", "inside_trunk", "outside_counts", "swivel_circle",
@@ -128,29 +129,6 @@ def swivel_circle(root: np.ndarray, middle: np.ndarray, end: np.ndarray, count: 
 #: symmetric section instead, walk131_01's right elbow (sweep condition 3, 2 views) kept 25.4 mm
 #: where this gives 15.6 (the earlier rule 25.1).
 NEARER_SECTION = (0.75, 1.2, 0.6)
-#: Points sampled on each of a limb's two segments to count where it leaves the silhouettes.
-REFUTE_SAMPLES = 6
-
-
-def outside_counts(inside_silhouettes: Callable[[np.ndarray], np.ndarray], roots: np.ndarray,
-                   middles: np.ndarray, ends: np.ndarray, samples: int = REFUTE_SAMPLES) -> np.ndarray:
-    """How many of a limb's points lie outside the silhouettes (in some view), for limbs (L, 3)
-    with their middle joints at `middles` (L, 3) or at candidates (L, C, 3): shape (L,) or (L, C).
-    The points: `samples` on each segment, root-middle and middle-end, at the centres of equal parts."""
-    middles = np.asarray(middles, dtype=float)
-    single = middles.ndim == 2
-    placed = middles[:, None] if single else middles
-    fractions = (np.arange(samples) + 0.5) / samples
-    root = np.broadcast_to(roots[:, None, None], (*placed.shape[:2], 1, 3))
-    end = np.broadcast_to(ends[:, None, None], (*placed.shape[:2], 1, 3))
-    middle = placed[:, :, None]
-    points = np.concatenate([root + fractions[:, None] * (middle - root),
-                             middle + fractions[:, None] * (end - middle)], axis=2)  # (L, C, 2 samples, 3)
-    outside = ~inside_silhouettes(points.reshape(-1, 3)).reshape(points.shape[:3])
-    counts = outside.sum(axis=2)
-    return counts[:, 0] if single else counts
-
-
 def _distances_to_lines(points: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
     """Distances [m] of points (L, 3) to the lines through starts and ends (L, 3) (to the start
     where the two coincide), shape (L,)."""
@@ -210,6 +188,14 @@ class SwivelSearch:
             so the criterion prefers an arm laid over or in front of the trunk wherever both views
             see it there. On jumps (2 views, clean) such hints put right elbows 50 mm off on
             average where the prior's were 16-18 (docs/method.md, "Elbows the image made worse than no image").
+        arm_cap: an elbow whose best sample on the terms lies nearer the trunk's axis (nearer_section)
+            than its best with the image task's overlap of the arm read no deeper than this [m]
+            (tracking.arm_support) is searched on the latter: the body-wide cap rewards an arm over
+            the trunk more than on its own thinner silhouette. Everywhere instead, walking elbows
+            that the body-wide overlap had kept went where the silhouette-axis term alone put them
+            (docs/sweep.md, "The elbows' tail"). None (default): the image task's values; the 2-view
+            sweep with tracking.arm_support.ARM_CAP improved the elbows' tail but lost 8-13 mm on
+            walk131_01's hanging arms (docs/sweep.md), so it is not the default.
     """
 
     body: BodyModel
@@ -223,12 +209,15 @@ class SwivelSearch:
     trunk_section: tuple[float, ...] | None = TRUNK_SECTION
     keep_unrefuted: bool = True
     nearer_section: tuple[float, ...] = NEARER_SECTION
+    arm_cap: float | None = None
 
     def __post_init__(self) -> None:
         if int(self.samples) < 3:
             raise InputError(f"samples: expected at least 3 points on a swivel circle, found {self.samples}")
         if int(self.refine) < 0:
             raise InputError(f"refine: expected a number of points >= 0, found {self.refine}")
+        if self.arm_cap is not None and not float(self.arm_cap) > 0.0:
+            raise InputError(f"arm_cap: expected a depth > 0 [m] or None, found {self.arm_cap}", parameter="arm_cap")
         self._limb_ids: dict[str, np.ndarray] = {}
         self._term_rows: dict[tuple[SegmentCriterion, int], np.ndarray] = {}
         self._trunk_ids = (self.body.frame_ids(list(TRUNK_KEYPOINTS))
@@ -340,7 +329,23 @@ class SwivelSearch:
             poses.append((current, task.at_pose(current)))
         weighted, present = self._weighted(poses, limb_ids[chosen, 1], circles)
         elbows = np.array([limbs[limb] in ("LElbow", "RElbow") for limb in chosen])
+        arm_cap = self.arm_cap
         forbidden = self._inside_trunk(configuration, elbows, circles)
+        if arm_cap is not None and elbows.any():
+            # An elbow reads its arm's own overlap where the image task's best swivel lies nearer the
+            # trunk's axis than that reading's: there the body-wide cap's preference may be the trunk.
+            arms = np.flatnonzero(elbows)
+            capped = weighted[:, arms]
+            cap_arm_overlap(self.terms, capped, roots[chosen[arms]], circles[arms], ends[chosen[arms]], arm_cap)
+            body_wide, own = (circles[arms, np.argmax(np.where(forbidden[arms], -np.inf, terms.sum(axis=0)), axis=1)]
+                              for terms in (weighted[:, arms], capped))
+            trunk = configuration.frame_positions(self._trunk_ids) if self._trunk_ids is not None else None
+            trunkward = (np.zeros(arms.size, dtype=bool) if trunk is None else
+                         farther_from_axis(body_wide, own, trunk[0], trunk[1], trunk[2], trunk[3], self.nearer_section))
+            arms = arms[trunkward]
+            weighted[:, arms] = capped[:, trunkward]
+        else:
+            arms = np.zeros(0, dtype=int)
         if self.refine:
             # Then around each limb's best sample, within one spacing of it on either side.
             best = np.argmax(np.where(forbidden, -np.inf, weighted.sum(axis=0)), axis=1)
@@ -360,6 +365,11 @@ class SwivelSearch:
             finer_weighted = np.zeros((*weighted.shape[:2], finer.shape[1]))
             if scored.any():
                 finer_weighted[:, scored] = self._weighted(poses, limb_ids[chosen[scored], 1], finer[scored])[0]
+            arms = arms[scored[arms]]
+            if arm_cap is not None and arms.size:
+                capped = finer_weighted[:, arms]
+                cap_arm_overlap(self.terms, capped, roots[chosen[arms]], finer[arms], ends[chosen[arms]], arm_cap)
+                finer_weighted[:, arms] = capped
             finer_forbidden[~scored] = True
             circles = np.concatenate([circles, finer], axis=1)
             weighted = np.concatenate([weighted, finer_weighted], axis=2)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["TRUNK_KEYPOINTS", "TRUNK_SECTION", "inside_trunk", "trunk_distance"]
+__all__ = ["TRUNK_KEYPOINTS", "TRUNK_SECTION", "farther_from_axis", "inside_trunk", "trunk_distance"]
 
 #: Keypoints that place the trunk: its axis from the pelvis centre to the neck, its width from the
 #: shoulders (inside_trunk).
@@ -59,3 +59,12 @@ def inside_trunk(points: np.ndarray, hip: np.ndarray, neck: np.ndarray, left_sho
     in half shoulder widths."""
     distance, along = trunk_distance(points, hip, neck, left_shoulder, right_shoulder, section)
     return (along > 0.0) & (along < 1.0) & (distance < 1.0)
+
+
+def farther_from_axis(starts: np.ndarray, ends: np.ndarray, hip: np.ndarray, neck: np.ndarray,
+                      left_shoulder: np.ndarray, right_shoulder: np.ndarray,
+                      section: tuple[float, ...] = TRUNK_SECTION) -> np.ndarray:
+    """Whether each of `ends` (..., 3) lies farther from the trunk's axis (trunk_distance in
+    `section`) than the matching point of `starts`, shape (...)."""
+    distance, _ = trunk_distance(np.stack([starts, ends], axis=-2), hip, neck, left_shoulder, right_shoulder, section)
+    return distance[..., 1] > distance[..., 0]
