@@ -107,7 +107,7 @@ def test_a_limb_off_its_turn_is_searched_when_hinted_lately_or_just_freed(human)
     every limb; then each its turn, a limb not free the frame before, and one hinted within the
     last 4 frames."""
     configuration = Configuration(human.model, pin.neutral(human.model))
-    cadence = SearchCadence(human, 4, min_radius=0.0, inside_silhouettes=None)
+    cadence = SearchCadence(human, 4, min_radius=0.0)
     assert cadence.choose(0, configuration, FREE) == FREE
     assert cadence.choose(1, configuration, FREE) == ["RKnee"]
     assert cadence.choose(2, configuration, ["LElbow", "RElbow"]) == []
@@ -123,13 +123,27 @@ def test_a_limb_bent_past_min_radius_since_its_last_search_is_searched(human, rn
     rose past min_radius are searched off their turn, and only those."""
     straight = Configuration(human.model, pin.neutral(human.model))
     bent = Configuration(human.model, random_human_configuration(human, rng, spread=0.8))
-    cadence = SearchCadence(human, 4, min_radius=0.05, inside_silhouettes=None)
-    before, _ = cadence._measure(straight, FREE)
-    after, _ = cadence._measure(bent, FREE)
+    cadence = SearchCadence(human, 4, min_radius=0.05, turn_deg=180.0)  # the trunk's turn left out
+    before, after = cadence._radii(straight, FREE), cadence._radii(bent, FREE)
     crossed = [name for name in FREE if before[name] < 0.05 <= after[name]]
     assert crossed, "no limb crossed: the test would check nothing"
     cadence.choose(0, straight, FREE)
     assert cadence.choose(1, bent, FREE) == [name for name in FREE if name in crossed or name == "RKnee"]
+
+
+@pytest.mark.parametrize(("turn_deg", "searched"), [(2.0, ["RKnee"]), (4.0, FREE)])
+def test_a_limb_is_searched_when_the_trunk_turned_since_its_last_search(human, turn_deg, searched):
+    """The whole body turned by 2 or 4 deg (about an axis across the shoulders' line) between two
+    frames: past the 3 deg of TURN_DEG every limb is searched, below it only the one whose turn it is."""
+    q = pin.neutral(human.model)
+    configuration = Configuration(human.model, q)
+    shoulders = np.subtract(*configuration.frame_positions(human.frame_ids(["RShoulder", "LShoulder"])))
+    axis = np.cross(shoulders, [0.0, 0.0, 1.0]) + np.cross(shoulders, [1.0, 0.0, 0.0])
+    turned = q.copy()
+    turned[3:7] = pin.Quaternion(pin.AngleAxis(np.deg2rad(turn_deg), axis / np.linalg.norm(axis))).coeffs()
+    cadence = SearchCadence(human, 4, min_radius=0.0)
+    assert cadence.choose(0, configuration, FREE) == FREE
+    assert cadence.choose(1, Configuration(human.model, turned), FREE) == searched
 
 
 @pytest.mark.parametrize("cadence", [0, -1, 1.5, True, "2"])

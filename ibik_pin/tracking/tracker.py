@@ -94,8 +94,7 @@ class Tracker:
                                                max_step_size=self.settings.image_step)
         self.swivel = SwivelSearch(body, terms, inside_silhouettes=self.image_task.inside_silhouettes,
                                    refine=int(self.settings.swivel_refine))
-        self.search_cadence = SearchCadence(body, self.settings.swivel_cadence, self.swivel.min_radius,
-                                            self.image_task.inside_silhouettes)
+        self.search_cadence = SearchCadence(body, self.settings.swivel_cadence, self.swivel.min_radius)
         if self.settings.image_moves not in IMAGE_MOVES:
             raise InputError(f"image_moves: expected one of {', '.join(IMAGE_MOVES)}, "
                              f"found {self.settings.image_moves!r}")
