@@ -134,7 +134,7 @@ def test_a_limb_bent_past_min_radius_since_its_last_search_is_searched(human, rn
 @pytest.mark.parametrize(("turn_deg", "searched"), [(2.0, ["RKnee"]), (4.0, FREE)])
 def test_a_limb_is_searched_when_the_trunk_turned_since_its_last_search(human, turn_deg, searched):
     """The whole body turned by 2 or 4 deg (about an axis across the shoulders' line) between two
-    frames: past the 3 deg of TURN_DEG every limb is searched, below it only the one whose turn it is."""
+    frames: past the 2.5 deg of TURN_DEG every limb is searched, below it only the one whose turn it is."""
     q = pin.neutral(human.model)
     configuration = Configuration(human.model, q)
     shoulders = np.subtract(*configuration.frame_positions(human.frame_ids(["RShoulder", "LShoulder"])))

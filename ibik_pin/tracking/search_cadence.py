@@ -11,12 +11,16 @@ put it. So a limb is searched every frame while one of these holds, and otherwis
 - the trunk turned more than TURN_DEG since its last search (the shoulders' or the hips' line):
   the cameras then see every limb from another side, and the criterion's basins on its circle
   move even where the limb keeps its pose on the body.
-The last is what holds the accuracy. On sweep conditions 0-13 (2 views, clean) a cadence of 2 or 3
-without it put the elbows of a hop with turns 3.2 and 4.6 mm further off (condition 6): there
-the hints' runs began on frames that a quiet limb skipped. The first hint of a run came with
-the trunk turning 1.7-8.5 deg a frame (medians of all frames 4.5-7.5 on hop turns, 1.2-1.4 on
-walking), where neither the limb's own axis turning, its radius changing, nor more of its points
-leaving the silhouettes told those frames from the quiet ones.
+The last is what holds the accuracy. On sweep conditions 0-13 (2 views, clean, 30 Hz) a cadence
+of 2 or 3 without it put the elbows of a hop with turns 3.2 and 4.6 mm further off (condition 6):
+there the hints' runs began on frames that a quiet limb skipped. On the searches of every limb
+every frame (conditions 0, 1, 5, 6, 7, 10), the first hint of a run came with the trunk turning
+0.4-15 deg a frame (medians of all frames 4.5-7.5 on the hop turns, 1.2-1.4 on walking), where
+neither the limb's own axis turning, its radius changing, nor more of its points leaving the
+silhouettes told those frames from the quiet ones. Replayed on those searches, a turn of 3 deg
+since the limb's last search left one run's first hint unsearched (condition 5; 1.2 mm on its
+elbows in the tracking), 2.5 none on the hop turns (docs/method.md, "Speed"). Counted since the
+limb's last search, the turn does not depend on the frame rate.
 With cadence 1 every free limb is searched every frame (no state is read).
 """
 
@@ -34,7 +38,7 @@ from ibik_pin.tracking.swivel import LIMB_ENDS
 __all__ = ["TURN_DEG", "SearchCadence"]
 
 #: The trunk's turn [deg] since a limb's last search past which the limb is searched again.
-TURN_DEG = 3.0
+TURN_DEG = 2.5
 #: The two lines whose turn is the trunk's.
 TRUNK_LINES = (("LShoulder", "RShoulder"), ("LHip", "RHip"))
 

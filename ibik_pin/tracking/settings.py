@@ -53,7 +53,7 @@ class TrackingSettings:
             from about 100 mm to under 20 mm (2 views; docs/results.md).
         swivel_cadence: a free elbow or knee whose searches keep hinting nothing is searched every
             this many frames (staggered across the limbs); one hinted lately, just freed, bent
-            past the search's min_radius, or with the trunk turned more than 3 deg since its last
+            past the search's min_radius, or with the trunk turned more than 2.5 deg since its last
             search, is searched every frame (tracking.search_cadence). 1: every free limb every
             frame.
         swivel_refine: points the swivel search then tries on each side of a limb's best sample,
