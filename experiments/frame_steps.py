@@ -7,7 +7,8 @@ motion capture, 2 and 4 views; the demo, 4 views). Only the run's own solve is c
 subject calibration's solves (--trial-lengths images tracks on a few frames first) are left out.
 Per frame of that solve:
 - steps: the targets-only steps (with the posture prior), the image steps (stop at the
-  criterion's peak; the undone step not counted), the closing step; swivel searches and hints;
+  criterion's peak; the undone step not counted), the closing step; swivel searches, the limbs
+  they search (TrackingSettings.swivel_cadence) and their hints;
 - round trip, on the limb coordinates (BodyModel.limb_coordinates): |a|, the move of frame t+1's
   targets-only steps, |b|, that of frame t's image steps, and cos(a, b). A cosine near -1 with
   |a| ~ |b| means each frame's targets-only steps take back what the image steps before gave: the
@@ -17,6 +18,7 @@ No timing: counts and moves, the same on any machine.
 
 A benchmark, not a test. Usage:
     python experiments/frame_steps.py --out out/frame_steps [--conditions cmu35_01:2,boxing_a:2,demo:4]
+        [--set swivel_cadence=1]
 """
 
 from __future__ import annotations
@@ -37,7 +39,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from realdata.clips import CLIPS
 from realdata.inputs import prepare_inputs
-from realdata.runner import DEFAULT_DATA, code_revision, run_variant, single_threaded_math, variant
+from realdata.runner import DEFAULT_DATA, code_revision, parse_settings, run_variant, single_threaded_math, variant
 
 from ibik_pin.app.demo import prepare_demo_inputs
 from ibik_pin.app.job import TrackJob
@@ -56,6 +58,7 @@ class FrameSolves:
     def __init__(self) -> None:
         self.solves: list[tuple[str, int, np.ndarray]] = []
         self.hints: list[int] = []
+        self.searched: list[int] = []
         self.limbs: np.ndarray | None = None
 
     @contextlib.contextmanager
@@ -67,7 +70,8 @@ class FrameSolves:
         def counted_track(tracker, names, targets, *arguments, **keywords):
             if not tracker.use_image:
                 return track(tracker, names, targets, *arguments, **keywords)
-            parts.solves, parts.hints, parts.limbs = [], [], tracker.body.limb_coordinates
+            parts.solves, parts.hints, parts.searched = [], [], []
+            parts.limbs = tracker.body.limb_coordinates
             recording["on"] = True
             try:
                 return track(tracker, names, targets, *arguments, **keywords)
@@ -87,6 +91,7 @@ class FrameSolves:
             found = hints(search, configuration, free)
             if recording["on"]:
                 parts.hints.append(len(found))
+                parts.searched.append(len(free))
             return found
 
         Tracker.track, Solver.solve, SwivelSearch.hints = counted_track, counted_solve, counted_hints  # type: ignore
@@ -118,6 +123,7 @@ class FrameSolves:
             "image_steps_per_frame": float(np.mean([frame["image"][0] for frame in frames])),
             "closing_steps_per_frame": float(np.mean([frame["closing"][0] for frame in frames])),
             "searches_per_frame": len(self.hints) / max(searched, 1),  # over every frame
+            "limbs_searched_per_frame": sum(self.searched) / max(searched, 1),
             "hints_per_frame": sum(self.hints) / max(searched, 1),
             "targets_limb_move_median_rad": float(np.median(np.linalg.norm(pull, axis=1))),
             "image_limb_move_median_rad": float(np.median(np.linalg.norm(climb, axis=1))),
@@ -125,7 +131,8 @@ class FrameSolves:
         }
 
 
-def run_condition(item: str, frames: int, cache: Path, data: Path, out: Path) -> tuple[str, dict]:
+def run_condition(item: str, frames: int, cache: Path, data: Path, out: Path,
+                  overrides: dict | None = None) -> tuple[str, dict]:
     motion, _, views_text = item.partition(":")
     views = int(views_text or 4)
     counter = FrameSolves()
@@ -135,11 +142,11 @@ def run_condition(item: str, frames: int, cache: Path, data: Path, out: Path) ->
             single_threaded_math()
             run_track(TrackJob(targets=paths.targets, static=paths.folder / "static.trc",
                                calibration=paths.calibration, masks=paths.masks, out=out / "runs" / "demo", quiet=True,
-                               settings=TrackingSettings(use_image=True)))
+                               settings=TrackingSettings(use_image=True, **(overrides or {}))))
             judged = None
         else:
             inputs = prepare_inputs(CLIPS[motion], data, frames, cache)
-            judged = run_variant(inputs, variant(f"ibik{views}v"), "clean", {},
+            judged = run_variant(inputs, variant(f"ibik{views}v"), "clean", overrides or {},
                                  out=out / "runs" / f"{motion}_{views}v").judged_mm
     return f"{motion}_{views}v", {**counter.figures(), "judged_error_mm": judged}
 
@@ -152,12 +159,15 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=120)
     parser.add_argument("--cache", type=Path, help="where the rendered inputs are kept (default: OUT/cache)")
     parser.add_argument("--conditions", default="boxing_a:2,boxing_a:4,cmu35_01:2,cmu35_01:4,demo:4")
+    parser.add_argument("--set", dest="settings", action="append", default=[], metavar="KEY=VALUE",
+                        help="override a TrackingSettings field for every run (repeatable)")
     arguments = parser.parse_args()
+    overrides = parse_settings(arguments.settings)
     arguments.out.mkdir(parents=True, exist_ok=True)
     cache = arguments.cache or arguments.out / "cache"
     results = {}
     for item in arguments.conditions.split(","):
-        name, figures = run_condition(item.strip(), arguments.frames, cache, arguments.data, arguments.out)
+        name, figures = run_condition(item.strip(), arguments.frames, cache, arguments.data, arguments.out, overrides)
         results[name] = figures
         print(f"{name}: " + ", ".join(f"{key} {value:.3g}" if isinstance(value, float) else f"{key} {value}"
                                       for key, value in figures.items()), flush=True)

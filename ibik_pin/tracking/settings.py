@@ -51,6 +51,11 @@ class TrackingSettings:
             motion threw into another basin of the criterion. Runs only when two views cross.
             With the trunk held (image_moves) it brought the real-mocap benchmark's boxing elbows
             from about 100 mm to under 20 mm (2 views; docs/results.md).
+        swivel_cadence: a free elbow or knee whose searches keep hinting nothing is searched every
+            this many frames (staggered across the limbs); one hinted lately, just freed, bent
+            past the search's min_radius, or with the trunk turned more than 2.5 deg since its last
+            search, is searched every frame (tracking.search_cadence). 1: every free limb every
+            frame.
         swivel_refine: points the swivel search then tries on each side of a limb's best sample,
             within one sample's spacing (tracking.swivel.SwivelSearch.refine; 0: none).
         feet_by_ankle: toe and heel targets move only the joints that do not move their ankle
@@ -97,6 +102,7 @@ class TrackingSettings:
     axis_weight: float = 1.0
     axis_scale: float = 0.10
     swivel_search: bool = True
+    swivel_cadence: int = 3
     swivel_refine: int = 4
     feet_by_ankle: bool = True
     image_moves: str = "limbs"

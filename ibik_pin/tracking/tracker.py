@@ -42,6 +42,7 @@ from ibik_pin.tracking.first_frame import solve_first_frame
 from ibik_pin.tracking.levels import StackPlan, StackTasks
 from ibik_pin.tracking.outcomes import LevelOutcome, level_outcomes
 from ibik_pin.tracking.result import TrackingResult
+from ibik_pin.tracking.search_cadence import SearchCadence
 from ibik_pin.tracking.settings import IMAGE_MOVES, IMAGE_STOPS, TrackingSettings
 from ibik_pin.tracking.stack import CRITERIA, Stack
 from ibik_pin.tracking.swivel import LIMB_ENDS, SwivelSearch, views_cross
@@ -93,6 +94,7 @@ class Tracker:
                                                max_step_size=self.settings.image_step)
         self.swivel = SwivelSearch(body, terms, inside_silhouettes=self.image_task.inside_silhouettes,
                                    refine=int(self.settings.swivel_refine))
+        self.search_cadence = SearchCadence(body, self.settings.swivel_cadence, self.swivel.min_radius)
         if self.settings.image_moves not in IMAGE_MOVES:
             raise InputError(f"image_moves: expected one of {', '.join(IMAGE_MOVES)}, "
                              f"found {self.settings.image_moves!r}")
@@ -127,11 +129,15 @@ class Tracker:
         """The joints a foot point target moves (ibik_pin.feet); None: every joint."""
         return foot_point_joints(self.body, name) if self.settings.feet_by_ankle else None
 
-    def _swivel_hints(self, configuration: Configuration, free: Sequence[str]) -> list[FramePositionTask]:
-        """Position tasks that hold each free elbow and knee at its swivel hint (tracking.swivel);
-        empty when no sample of any circle is clearly better than where the joint is."""
+    def _swivel_hints(self, configuration: Configuration, free: Sequence[str], frame: int) -> list[FramePositionTask]:
+        """Position tasks that hold each free elbow and knee the frame searches (search_cadence) at
+        its swivel hint (tracking.swivel); empty when no sample of any circle searched is clearly
+        better than where the joint is."""
+        searched = self.search_cadence.choose(frame, configuration, free)
+        found = self.swivel.hints(configuration, searched) if searched else {}
+        self.search_cadence.found(list(found))
         tasks = []
-        for name, position in self.swivel.hints(configuration, free).items():
+        for name, position in found.items():
             if name not in self._hint_tasks:
                 self._hint_tasks[name] = FramePositionTask(self.body.model, self.body.keypoints[name])
             self._hint_tasks[name].set_target(position)
@@ -139,8 +145,8 @@ class Tracker:
         return tasks
 
     def _solve(self, configuration: Configuration, plan: StackPlan, iterations: int | None = None,
-               free: Sequence[str] = ()) -> SolveResult:
-        """One frame's solve from configuration.q (`iterations` steps, default the settings').
+               free: Sequence[str] = (), frame: int = 0) -> SolveResult:
+        """Frame `frame`'s solve from configuration.q (`iterations` steps, default the settings').
 
         With image_moves="limbs", targets-only steps first, then the steps with the image under a
         top level that holds the root, spine, clavicles and neck where the targets put them. Why:
@@ -153,7 +159,8 @@ class Tracker:
         leaves it exactly that.
 
         With the swivel search, `free` names the elbows and knees that are not targets this frame:
-        their circles are searched once the targets are met, and the hints are a level just above
+        their circles are searched once the targets are met (those the cadence picks:
+        TrackingSettings.swivel_cadence), and the hints are a level just above
         the image's (StackPlan.with_level_above_image; with image_moves="all", the search follows
         the solve, which is then run again with the hints).
 
@@ -174,7 +181,7 @@ class Tracker:
         if self._trunk_hold is None:
             solved = self.solver.solve(configuration, levels, iterations=iterations, tolerance=tolerance,
                                        stop_at_peak=peak)
-            hints = self._swivel_hints(configuration, free) if search else []
+            hints = self._swivel_hints(configuration, free, frame) if search else []
             if hints:
                 self.solver.solve(configuration, plan.with_level_above_image(hints), iterations=iterations,
                                   stop_at_peak=peak)
@@ -184,7 +191,7 @@ class Tracker:
         self.solver.solve(configuration, plan.blind_levels(), iterations=int(self.settings.target_iterations),
                           tolerance=self.settings.target_step_tolerance)
         self._trunk_hold.set_reference(configuration.q)
-        hints = self._swivel_hints(configuration, free) if search else []
+        hints = self._swivel_hints(configuration, free, frame) if search else []
         hinted = plan.with_level_above_image(hints) if hints else levels
         solved = self.solver.solve(configuration, [[self._trunk_hold], *hinted], iterations=iterations,
                                    tolerance=tolerance, stop_at_peak=peak)
@@ -249,6 +256,7 @@ class Tracker:
             camera_names=[camera.name for camera in self.cameras] if use_image else [],
         )
         configuration = Configuration(self.body.model, initial_configuration(self.body, names, targets[0]))
+        self.search_cadence.reset()
         caps = support_caps(self.cameras, configuration.q[:3]) if use_image else []
         axis_scales = support_caps(self.cameras, configuration.q[:3], self.settings.axis_scale) if use_image else []
         # Frame t + 1's silhouettes are read and its support images built while frame t is solved.
@@ -282,7 +290,7 @@ class Tracker:
                                                solve=lambda configuration, _levels, iterations, free=free: self._solve(
                                                    configuration, plan, iterations, free=free))
                 else:
-                    solved = self._solve(configuration, plan, free=free)
+                    solved = self._solve(configuration, plan, free=free, frame=frame)
                 result.level_reports.append(solved.levels)
                 result.iterations.append(int(solved.iterations))
                 solves.append((started, time.perf_counter()))
