@@ -25,14 +25,16 @@ from ibik_pin.io.trc import TrcData, read_trc, write_trc
 from ibik_pin.readahead.frame_images import frame_images
 from ibik_pin.subject.calibration import calibrate_static_trial
 from ibik_pin.subject.scaling import keypoint_lengths, segment_lengths_from_keypoints
-from ibik_pin.subject.trial_lengths import DEFAULT_FACTORS, refine_from_images, refine_from_reach
+from ibik_pin.subject.trial_lengths import DEFAULT_FACTORS, LIMBS, refine_from_images, refine_from_reach
 from ibik_pin.tasks.image import ImageTask
 from ibik_pin.tasks.silhouette_axis import SilhouetteAxisTask
 from ibik_pin.tracking.settings import TrackingSettings
 from ibik_pin.tracking.target_filter import filter_targets
+from ibik_pin.tracking.trunk import TRUNK_SECTION
 from ibik_pin.tracking.views import support_caps
 from ibik_pin.vision.camera import cameras_in_frame
 from sweepkit.conditions import ConditionInputs, _trc, drift_static
+from sweepkit.split_cue import AxisDistanceCue, axis_distance_image
 
 # scaling's length names -> the static keypoint at the segment's far end (drift_static's child).
 SEGMENT_CHILDREN = {"left_thigh": "LKnee", "left_shank": "LAnkle", "right_thigh": "RKnee", "right_shank": "RAnkle",
@@ -41,6 +43,11 @@ SEGMENT_CHILDREN = {"left_thigh": "LKnee", "left_shank": "LAnkle", "right_thigh"
 LENGTHS = ("static", "reach", "images", "oracle")
 #: The factors tried on both segments of a leg at once (trial_lengths' default grid).
 LEG_FACTORS = DEFAULT_FACTORS
+#: The split's trial (split=): factors on a thigh, its shank taking up the difference (+-8 % by 1 %),
+#: legs whose knee circle is at least 80 mm (the swivel search's bound), the cue's segment spans,
+#: robust scale and clearance [m] (sweepkit.split_cue).
+SPLIT = {"factors": np.linspace(0.92, 1.08, 17), "min_radius": 0.08, "upper_span": (0.6, 0.9),
+         "lower_span": (0.1, 0.8), "robust_scale_m": 0.05, "clearance_m": 0.15}
 
 
 def _write_static(inputs: ConditionInputs, lengths: dict[str, float], wanted: dict[str, float], name: str) -> Path:
@@ -90,9 +97,15 @@ def oracle_static(inputs: ConditionInputs) -> tuple[Path, dict]:
 
 def image_static(inputs: ConditionInputs, estimate: TrcData, views: int, silhouettes: str,
                  settings: TrackingSettings | None = None, smoothing_frames: int = 3,
-                 factors: np.ndarray = LEG_FACTORS, target_filter: str | float = "off") -> tuple[Path, dict]:
+                 factors: np.ndarray = LEG_FACTORS, target_filter: str | float = "off",
+                 split: dict | None = None, arms: str = "reach") -> tuple[Path, dict]:
     """The static with the legs' lengths the first `views` cameras' silhouettes prefer around the
-    pose `estimate` (a PIK run's joints.trc), the arms' by reach."""
+    pose `estimate` (a PIK run's joints.trc), the arms' by reach.
+
+    Two trials, not kept (docs/sweep.md): `split` (SPLIT's keys, any subset overriding SPLIT) then
+    chooses each leg's split between thigh and shank on the centre-line cue, its sum kept, the knees
+    where the legs' factor put them; `arms="images"` chooses the arms' factor on the silhouettes like
+    the legs', no elbow inside the trunk."""
     if views < 2:
         path, report = reach_static(inputs, smoothing_frames, target_filter)
         return path, dict(report, evidence="one view: the reach only")
@@ -121,14 +134,38 @@ def image_static(inputs: ConditionInputs, estimate: TrcData, views: int, silhoue
             keypoints = {name: estimate.positions[frame, k] for k, name in enumerate(estimate.marker_names)}
             yield keypoints, [(image_task, 1.0), (axis_task, settings.axis_weight)]
 
-    legs = refine_from_images(body, model_lengths, frames(), factors=factors, limbs=("left_leg", "right_leg"),
-                              keep_ratio=True)
-    arms = refine_from_reach(model_lengths, targets.marker_names, targets.positions, limbs=("left_arm", "right_arm"),
-                             smoothing_frames=smoothing_frames)
+    on_images = ("left_leg", "right_leg") + (("left_arm", "right_arm") if arms == "images" else ())
+    legs = refine_from_images(body, model_lengths, frames(), factors=factors, limbs=on_images, keep_ratio=True,
+                              trunk_section=TRUNK_SECTION)
+    if split is not None:
+        options = {**SPLIT, **split}
+        cue = AxisDistanceCue(body, ("left_leg", "right_leg"), upper_span=options["upper_span"],
+                              lower_span=options["lower_span"])
+        robust = support_caps(cameras, centre, options["robust_scale_m"])
+        clearance = support_caps(cameras, centre, options["clearance_m"])
+
+        def split_frames():
+            for frame in range(estimate.positions.shape[0]):
+                cue.set_views(cameras, [axis_distance_image(mask) for mask in source(frame)], robust, clearance)
+                keypoints = {name: estimate.positions[frame, k] for k, name in enumerate(estimate.marker_names)}
+                # the knees where the criteria put them: the cue reads only samples clear of the other
+                # segments at the pose, and PIK's knees are cm off (the split then went 12-34 mm wrong)
+                keypoints.update({LIMBS[limb].middle: legs.middles[limb][frame] for limb in legs.middles})
+                yield keypoints, [(cue, 1.0)]
+
+        split_legs = refine_from_images(body, legs.lengths, split_frames(), factors=options["factors"],
+                                        limbs=("left_leg", "right_leg"), keep_sum=True,
+                                        min_radius=options["min_radius"])
+        legs = type(legs)(split_legs.lengths, legs.before,
+                          {name: {**legs.evidence[name], "split": split_legs.evidence.get(name)}
+                           for name in legs.evidence})
+    by_reach = refine_from_reach(model_lengths, targets.marker_names, targets.positions,
+                                 limbs=("left_arm", "right_arm"), smoothing_frames=smoothing_frames)
     lengths = static_lengths(inputs)
     wanted = dict(lengths)
     for name in SEGMENT_CHILDREN:
-        refined = legs.lengths[name] if "thigh" in name or "shank" in name else arms.lengths[name]
+        on_silhouettes = "thigh" in name or "shank" in name or arms == "images"
+        refined = legs.lengths[name] if on_silhouettes else by_reach.lengths[name]
         wanted[name] = lengths[name] * refined / model_lengths[name]
     report = dict(_report(lengths, wanted), evidence=legs.evidence)
     suffix = "" if target_filter == "off" else f"_{target_filter}"
