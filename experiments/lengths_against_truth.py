@@ -1,10 +1,10 @@
 """How close the refined limb lengths come to the trial's true ones, without tracking: per sweep
 condition, each segment's error [mm] with the static's lengths, with sweepkit.lengths.image_static's
-(the legs' one factor on the silhouettes, the arms' reach) and with one of its trials: the legs'
-split on the centre-line cue (--split, a JSON of sweepkit.lengths.SPLIT overrides) or the arms on
-the silhouettes (--arms images).
+without its split (the legs' one factor on the silhouettes, the arms' reach), and with the legs'
+split on the centre lines (--trial split, image_static's default) or the arms' factor on the
+silhouettes (--trial arms).
 
-    python experiments/lengths_against_truth.py --keep /tmp/keep --conditions 14 --split '{}'
+    python experiments/lengths_against_truth.py --keep /tmp/keep --conditions 14 --trial split
 
 The conditions' inputs come from `--keep` (written there if absent, as sweep.py --keep does); the PIK
 pass each refinement starts from is cached there too (pik_<filter>.trc).
@@ -49,12 +49,10 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--views", type=int, default=2)
     parser.add_argument("--silhouettes", default="clean")
     parser.add_argument("--target-filter", default="auto")
-    parser.add_argument("--split", default=None, help="JSON: overrides of sweepkit.lengths.SPLIT (none: no split)")
-    parser.add_argument("--arms", default="reach", help="image_static's arms: reach or images")
+    parser.add_argument("--trial", choices=("split", "arms"), default="split")
     parser.add_argument("--out", type=Path, default=None, help="a JSON of every leg's figures")
     arguments = parser.parse_args(argv)
-    split = None if arguments.split is None else json.loads(arguments.split)
-    segments = ARMS if arguments.arms == "images" and split is None else LEGS
+    segments = ARMS if arguments.trial == "arms" else LEGS
     rows = []
     for index in range(arguments.first, arguments.first + arguments.conditions):
         condition = draw_condition(index, arguments.seed)
@@ -66,9 +64,10 @@ def main(argv: list[str] | None = None) -> dict:
         settings = tracking_settings(variant(f"ibik{arguments.views}v"), arguments.silhouettes)
         truth = segment_lengths_from_keypoints(inputs.truth_names, inputs.truth)
         _, one = image_static(inputs, estimate, arguments.views, arguments.silhouettes, settings,
-                              target_filter=arguments.target_filter)
+                              target_filter=arguments.target_filter, split=False)
         _, two = image_static(inputs, estimate, arguments.views, arguments.silhouettes, settings,
-                              target_filter=arguments.target_filter, split=split, arms=arguments.arms)
+                              target_filter=arguments.target_filter, split=arguments.trial == "split",
+                              arms="images" if arguments.trial == "arms" else "reach")
         row = {"index": index, "motion": condition.motion}
         for name in segments:
             row[name] = {"truth_mm": 1e3 * truth[name], "static_mm": one[name]["static_mm"] - 1e3 * truth[name],

@@ -4,9 +4,10 @@ file whose limb segments have the refined lengths (each segment scaled about its
 the keypoints below it carried along), which ``ibik track --static`` then calibrates on.
 
 - "reach": every limb lengthened where its targets' 98th-percentile reach exceeds its segments' sum.
-- "images": the legs' lengths (one factor for both segments: the silhouettes, as the criteria read
-  them, tell a leg's length better than its split between thigh and shank) chosen on the views'
-  silhouettes around the PIK pose, pairs that cannot reach the targets excluded; the arms by reach
+- "images": the legs' lengths (one factor for both segments, as the criteria read the silhouettes)
+  chosen on the views' silhouettes around the PIK pose, pairs that cannot reach the targets
+  excluded, then each leg's split between thigh and shank (its sum kept) on the silhouettes' centre
+  lines, which do not depend on the limbs' widths (subject.split_cue); the arms by reach
   (the criteria put hanging arms against the trunk). One view sees no depth: there the legs too go
   by reach (on the sweep, one view's silhouettes took IBIK 1v knees from 34.0 to 36.2 mm).
 """
@@ -25,7 +26,8 @@ from ibik_pin.io.trc import TrcData, read_trc, write_trc
 from ibik_pin.readahead.frame_images import frame_images
 from ibik_pin.subject.calibration import calibrate_static_trial
 from ibik_pin.subject.scaling import keypoint_lengths, segment_lengths_from_keypoints
-from ibik_pin.subject.trial_lengths import DEFAULT_FACTORS, LIMBS, refine_from_images, refine_from_reach
+from ibik_pin.subject.split_cue import refine_split
+from ibik_pin.subject.trial_lengths import DEFAULT_FACTORS, refine_from_images, refine_from_reach
 from ibik_pin.tasks.image import ImageTask
 from ibik_pin.tasks.silhouette_axis import SilhouetteAxisTask
 from ibik_pin.tracking.settings import TrackingSettings
@@ -34,7 +36,6 @@ from ibik_pin.tracking.trunk import TRUNK_SECTION
 from ibik_pin.tracking.views import support_caps
 from ibik_pin.vision.camera import cameras_in_frame
 from sweepkit.conditions import ConditionInputs, _trc, drift_static
-from sweepkit.split_cue import AxisDistanceCue, axis_distance_image
 
 # scaling's length names -> the static keypoint at the segment's far end (drift_static's child).
 SEGMENT_CHILDREN = {"left_thigh": "LKnee", "left_shank": "LAnkle", "right_thigh": "RKnee", "right_shank": "RAnkle",
@@ -43,11 +44,6 @@ SEGMENT_CHILDREN = {"left_thigh": "LKnee", "left_shank": "LAnkle", "right_thigh"
 LENGTHS = ("static", "reach", "images", "oracle")
 #: The factors tried on both segments of a leg at once (trial_lengths' default grid).
 LEG_FACTORS = DEFAULT_FACTORS
-#: The split's trial (split=): factors on a thigh, its shank taking up the difference (+-8 % by 1 %),
-#: legs whose knee circle is at least 80 mm (the swivel search's bound), the cue's segment spans,
-#: robust scale and clearance [m] (sweepkit.split_cue).
-SPLIT = {"factors": np.linspace(0.92, 1.08, 17), "min_radius": 0.08, "upper_span": (0.6, 0.9),
-         "lower_span": (0.1, 0.8), "robust_scale_m": 0.05, "clearance_m": 0.15}
 
 
 def _write_static(inputs: ConditionInputs, lengths: dict[str, float], wanted: dict[str, float], name: str) -> Path:
@@ -98,14 +94,13 @@ def oracle_static(inputs: ConditionInputs) -> tuple[Path, dict]:
 def image_static(inputs: ConditionInputs, estimate: TrcData, views: int, silhouettes: str,
                  settings: TrackingSettings | None = None, smoothing_frames: int = 3,
                  factors: np.ndarray = LEG_FACTORS, target_filter: str | float = "off",
-                 split: dict | None = None, arms: str = "reach") -> tuple[Path, dict]:
+                 split: bool = True, arms: str = "reach") -> tuple[Path, dict]:
     """The static with the legs' lengths the first `views` cameras' silhouettes prefer around the
-    pose `estimate` (a PIK run's joints.trc), the arms' by reach.
+    pose `estimate` (a PIK run's joints.trc), the arms' by reach: each leg's factor, then (`split`)
+    its split between thigh and shank on the centre lines (subject.split_cue.refine_split).
 
-    Two trials, not kept (docs/sweep.md): `split` (SPLIT's keys, any subset overriding SPLIT) then
-    chooses each leg's split between thigh and shank on the centre-line cue, its sum kept, the knees
-    where the legs' factor put them; `arms="images"` chooses the arms' factor on the silhouettes like
-    the legs', no elbow inside the trunk."""
+    `arms="images"` (a trial, not kept: docs/sweep.md) chooses the arms' factor on the silhouettes
+    like the legs', no elbow inside the trunk."""
     if views < 2:
         path, report = reach_static(inputs, smoothing_frames, target_filter)
         return path, dict(report, evidence="one view: the reach only")
@@ -137,28 +132,10 @@ def image_static(inputs: ConditionInputs, estimate: TrcData, views: int, silhoue
     on_images = ("left_leg", "right_leg") + (("left_arm", "right_arm") if arms == "images" else ())
     legs = refine_from_images(body, model_lengths, frames(), factors=factors, limbs=on_images, keep_ratio=True,
                               trunk_section=TRUNK_SECTION)
-    if split is not None:
-        options = {**SPLIT, **split}
-        cue = AxisDistanceCue(body, ("left_leg", "right_leg"), upper_span=options["upper_span"],
-                              lower_span=options["lower_span"])
-        robust = support_caps(cameras, centre, options["robust_scale_m"])
-        clearance = support_caps(cameras, centre, options["clearance_m"])
-
-        def split_frames():
-            for frame in range(estimate.positions.shape[0]):
-                cue.set_views(cameras, [axis_distance_image(mask) for mask in source(frame)], robust, clearance)
-                keypoints = {name: estimate.positions[frame, k] for k, name in enumerate(estimate.marker_names)}
-                # the knees where the criteria put them: the cue reads only samples clear of the other
-                # segments at the pose, and PIK's knees are cm off (the split then went 12-34 mm wrong)
-                keypoints.update({LIMBS[limb].middle: legs.middles[limb][frame] for limb in legs.middles})
-                yield keypoints, [(cue, 1.0)]
-
-        split_legs = refine_from_images(body, legs.lengths, split_frames(), factors=options["factors"],
-                                        limbs=("left_leg", "right_leg"), keep_sum=True,
-                                        min_radius=options["min_radius"])
-        legs = type(legs)(split_legs.lengths, legs.before,
-                          {name: {**legs.evidence[name], "split": split_legs.evidence.get(name)}
-                           for name in legs.evidence})
+    if split:
+        poses = [{name: estimate.positions[frame, k] for k, name in enumerate(estimate.marker_names)}
+                 for frame in range(estimate.positions.shape[0])]
+        legs = refine_split(body, legs, poses, source, cameras, centre)
     by_reach = refine_from_reach(model_lengths, targets.marker_names, targets.positions,
                                  limbs=("left_arm", "right_arm"), smoothing_frames=smoothing_frames)
     lengths = static_lengths(inputs)

@@ -1,11 +1,10 @@
-"""Where a limb bends, from the silhouettes' centre lines: a cue for the split of its length (an
-experiment: not kept, docs/sweep.md "The split of a leg from the centre lines").
+"""Where a limb bends, from the silhouettes' centre lines: a cue for the split of its length.
 
 The overlap criterion (tasks.image) rewards samples inside the silhouette, so a thick thigh draws
 the knee toward it; the silhouette-axis term (tasks.silhouette_axis) asks every axis sample for its
 nearest segment and was biased too (docs/sweep.md). This cue goes the other way round and reads no
 width: each projected sample of the limb's two segments is scored by its distance to the nearest
-centre-line pixel of the view (:func:`axis_distance_image`), robustly,
+centre-line pixel of the view (vision.medial_axis.axis_distance_image), robustly,
 
     value = - mean over views and samples of  1 - exp(-(d_i / c)^2)
 
@@ -19,26 +18,28 @@ between them. A bent limb's two centre lines meet at its middle joint; a wrong s
 segment off its line whatever the swivel.
 
 It answers as refine_from_images' criteria do (frame_ids, at_pose, values_at_moves), for the
-middle joints of the limbs it was built for.
+middle joints of the limbs it was built for; :func:`refine_split` chooses the split with it.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
 from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
-from ibik_pin.subject.trial_lengths import LIMBS
+from ibik_pin.subject.trial_lengths import LIMBS, TrialLengths, refine_from_images
 from ibik_pin.vision.camera import CameraLike
-from ibik_pin.vision.distance import box_around, distance_to_background
+from ibik_pin.vision.medial_axis import axis_distance_image
 
-__all__ = ["AxisDistanceCue", "axis_distance_image"]
+__all__ = ["CLEARANCE_M", "LOWER_SPAN", "MIN_RADIUS", "ROBUST_SCALE_M", "SPLIT_FACTORS", "UPPER_SPAN",
+           "AxisDistanceCue", "refine_split"]
 
-#: Fractions of each segment read, from its root end: the thigh's first third merges with the pelvis.
-UPPER_SPAN = (0.35, 0.85)
-LOWER_SPAN = (0.15, 0.85)
+#: Fractions of each segment read, from its root end: the thigh's upper part merges with the pelvis
+#: and the other thigh, the shank's lower end with the foot (chosen on the sweep, docs/sweep.md).
+UPPER_SPAN = (0.6, 0.9)
+LOWER_SPAN = (0.1, 0.8)
 
 
 class AxisDistanceCue:
@@ -151,32 +152,51 @@ def _clearance_px(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(points).all(axis=1), nearest.min(axis=1), 0.0)
 
 
-def axis_distance_image(mask: np.ndarray, min_depth_px: float = 2.0, ridge_slope: float = 0.7) -> np.ndarray:
-    """(H, W) float32 distance [px] of every pixel to the silhouette's nearest centre-line pixel; +inf
-    everywhere for a silhouette without one.
 
-    A projected bone lies on its limb's centre line whatever the limb's width: this image scores a
-    segment's samples by how far they lie from a centre line (the reverse of the silhouette-axis term,
-    which asks each axis sample for its nearest segment). Here every centre-line pixel counts, so the
-    ridge is the stricter one where the distance to the background stops growing (its slope, 1 across
-    a band, under `ridge_slope`): vision.medial_axis.medial_axis_pixels' local maxima also mark the
-    steps of an oblique outline, harmless once thinned and robustly weighed, not here.
+#: Factors tried on a thigh, its shank taking up the difference: +-3 % by 1 % (a static's split was
+#: off by up to 8 %, but the cue's own errors reach 20-35 mm on a few legs and a wider grid let them
+#: through: on the sweep's conditions 0-13, +-8 % made the legs' mean error 6.0 -> 7.1 mm, +-3 % 4.9).
+SPLIT_FACTORS = np.linspace(0.97, 1.03, 7)
+#: A frame scores a leg's split only if its knee's circle has this radius [m] (the swivel search's bound).
+MIN_RADIUS = 0.08
+#: The cue's robust scale and the clearance another segment keeps from a sample read [m], at the
+#: subject's distance: about a limb's radius, and two.
+ROBUST_SCALE_M = 0.05
+CLEARANCE_M = 0.15
+
+
+def refine_split(body: BodyModel, legs: TrialLengths, poses: Sequence[Mapping[str, np.ndarray]],
+                 masks_of_pose: Callable[[int], Sequence[np.ndarray]], cameras: Sequence[CameraLike],
+                 subject_position: np.ndarray, limbs: Sequence[str] = ("left_leg", "right_leg")) -> TrialLengths:
+    """Each limb's split between its segments chosen on the views' centre lines, its sum kept.
 
     Args:
-        mask: (H, W) silhouette, non-zero = person.
-        min_depth_px: centre-line pixels at least this far inside [px] (spurs of the outline left out).
-        ridge_slope: the distance's largest slope [px / px] on the ridge.
+        legs: the limbs' lengths refined on the silhouettes (refine_from_images, e.g. one factor per
+            limb), with each frame's middle joint (`middles`): the cue reads only the samples clear
+            of the pose's other segments, and a first pass without the image puts knees cm off
+            (on the sweep the split then went 12-34 mm wrong).
+        poses: per frame refine_from_images read, keypoint name -> position (3,) [m].
+        masks_of_pose: index into `poses` -> one silhouette per camera.
+        subject_position: (3,) [m] where the scales in pixels are taken.
+
+    Returns:
+        The lengths with the split chosen; per limb the evidence of `legs` with "split" added.
     """
-    mask = np.asarray(mask)
-    if mask.ndim != 2:
-        raise InputError(f"mask: expected a 2D (H, W) image, found shape {mask.shape}")
-    person = (mask != 0).view(np.uint8) if mask.dtype == bool else (mask != 0).astype(np.uint8)
-    off_axis = np.ones(mask.shape, dtype=np.uint8)
-    if person.any():
-        rows, columns = box_around(person)
-        depth = distance_to_background(np.pad(person[rows, columns], 1)).astype(np.float64)
-        slope_rows, slope_columns = np.gradient(depth)
-        depth, slope = depth[1:-1, 1:-1], np.hypot(slope_rows, slope_columns)[1:-1, 1:-1]
-        ridge = (depth >= min_depth_px) & (slope < ridge_slope)
-        off_axis[rows, columns][ridge] = 0
-    return distance_to_background(off_axis)
+    chosen = [name for name in limbs if name in legs.middles]
+    cue = AxisDistanceCue(body, chosen)
+    centre = np.asarray(subject_position, dtype=float)[None]
+    robust = [float(max(camera.pixel_radius(centre, np.array([ROBUST_SCALE_M]))[0], 1.0)) for camera in cameras]
+    clearance = [float(max(camera.pixel_radius(centre, np.array([CLEARANCE_M]))[0], 1.0)) for camera in cameras]
+
+    def frames() -> Iterator:
+        for index, pose in enumerate(poses):
+            cue.set_views(cameras, [axis_distance_image(mask) for mask in masks_of_pose(index)], robust, clearance)
+            placed = dict(pose)
+            placed.update({LIMBS[name].middle: legs.middles[name][index] for name in chosen})
+            yield placed, [(cue, 1.0)]
+
+    split = refine_from_images(body, legs.lengths, frames(), factors=SPLIT_FACTORS, limbs=chosen, keep_sum=True,
+                               min_radius=MIN_RADIUS)
+    evidence = {name: ({**entry, "split": {**split.evidence[name], "kind": "centre lines"}}
+                       if name in split.evidence else entry) for name, entry in legs.evidence.items()}
+    return TrialLengths(split.lengths, legs.before, evidence, legs.middles)

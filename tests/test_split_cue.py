@@ -1,16 +1,16 @@
-"""The centre-line cue for a leg's split (sweepkit.split_cue): on silhouettes of a thick thigh and a
+"""The centre-line cue for a leg's split (subject.split_cue): on silhouettes of a thick thigh and a
 thin shank it moves a wrong split toward the truth, where the widths would pull an overlap criterion."""
 
 import cv2
 import numpy as np
 import pytest
-from sweepkit.lengths import SPLIT
-from sweepkit.split_cue import AxisDistanceCue, axis_distance_image
 
 from ibik_pin.exceptions import InputError
 from ibik_pin.human import load_human
+from ibik_pin.subject.split_cue import CLEARANCE_M, MIN_RADIUS, ROBUST_SCALE_M, AxisDistanceCue
 from ibik_pin.subject.trial_lengths import refine_from_images
 from ibik_pin.vision.camera import OrthographicCamera
+from ibik_pin.vision.medial_axis import axis_distance_image
 
 THIGH, SHANK = 0.42, 0.40
 THIGH_RADIUS, SHANK_RADIUS = 0.08, 0.035  # the sweep's silhouette body at the hip and the knee [m]
@@ -55,19 +55,20 @@ def _silhouette(camera: OrthographicCamera, leg: np.ndarray) -> np.ndarray:
 def test_the_cue_moves_a_wrong_split_toward_the_truth_whatever_the_widths():
     body = load_human()
     cameras = _cameras()
-    cue = AxisDistanceCue(body, ["left_leg"], upper_span=SPLIT["upper_span"], lower_span=SPLIT["lower_span"])
+    cue = AxisDistanceCue(body, ["left_leg"])
     # Every other keypoint far above the leg in both views: no other segment near its samples.
     far = {name: np.array([-1.0, 2.0 + 0.01 * k, 1.0]) for k, name in enumerate(body.keypoints)}
 
     def frames():
         for leg in _legs(12):
             cue.set_views(cameras, [axis_distance_image(_silhouette(camera, leg)) for camera in cameras],
-                          [SPLIT["robust_scale_m"] * SCALE] * 2, [SPLIT["clearance_m"] * SCALE] * 2)
+                          [ROBUST_SCALE_M * SCALE] * 2, [CLEARANCE_M * SCALE] * 2)
             yield dict(far, LHip=leg[0], LKnee=leg[1], LAnkle=leg[2]), [(cue, 1.0)]
 
     wrong = {"left_thigh": THIGH - 0.017, "left_shank": SHANK + 0.017}  # 4 % of the thigh the wrong way
-    refined = refine_from_images(body, wrong, frames(), factors=SPLIT["factors"], limbs=["left_leg"], keep_sum=True,
-                                 min_radius=SPLIT["min_radius"])
+    # A wider grid than the default's +-3 %: the cue's own bias, not the grid, is under test.
+    refined = refine_from_images(body, wrong, frames(), factors=np.linspace(0.92, 1.08, 17), limbs=["left_leg"],
+                                 keep_sum=True, min_radius=MIN_RADIUS)
     assert refined.lengths["left_thigh"] + refined.lengths["left_shank"] == pytest.approx(THIGH + SHANK, abs=1e-12)
     # The grid's step is 1 % of the thigh (4.1 mm): within one step of the truth.
     assert refined.lengths["left_thigh"] == pytest.approx(THIGH, abs=0.0045)
