@@ -60,3 +60,28 @@ def test_images_without_silhouettes_fall_back_to_the_reach(short_legged, tmp_pat
     assert main(arguments) == 0
     evidence = json.loads((tmp_path / "out" / "report.json").read_text())["trial_lengths"]["evidence"]
     assert all(entry["kind"] == "reach" for entry in evidence.values())
+
+
+def test_images_move_a_wrong_split_of_the_legs_toward_the_truth(tmp_path):
+    """A static whose knees sit 4 % of the thigh too high (thighs short, shanks long, sums nearly
+    kept): the centre lines move each leg's split toward the truth (the grid allows 3 %)."""
+    paths = prepare_demo_inputs(tmp_path / "input", views=2, frame_step=8)
+    static = read_trc(paths.folder / "static.trc")
+    for side in "LR":
+        hip, knee = static.marker_names.index(f"{side}Hip"), static.marker_names.index(f"{side}Knee")
+        static.positions[:, knee] -= 0.04 * (static.positions[:, knee] - static.positions[:, hip])
+    write_trc(tmp_path / "static_split.trc", static)
+    arguments = ["track", "--targets", str(paths.targets), "--calibration", str(paths.calibration),
+                 "--masks", str(paths.masks), "--static", str(tmp_path / "static_split.trc"),
+                 "--trial-lengths", "images", "--quiet", "--out", str(tmp_path / "out")]
+    assert main(arguments) == 0
+    lengths = json.loads((tmp_path / "out" / "report.json").read_text())["trial_lengths"]
+    truth = read_trc(paths.truth)
+    position = dict(zip(truth.marker_names, np.transpose(truth.positions * METRES_PER_UNIT[truth.units] * 1e3,
+                                                         (1, 0, 2)), strict=True))
+    for side, limb in (("L", "left"), ("R", "right")):
+        true_thigh = np.median(np.linalg.norm(position[f"{side}Hip"] - position[f"{side}Knee"], axis=1))
+        segment = lengths["segments_mm"][f"{limb}_thigh"]
+        assert lengths["evidence"][f"{limb}_leg"]["split"]["kind"] == "centre lines"
+        assert abs(segment["trial"] - true_thigh) < abs(segment["static"] - true_thigh) - 4.0, (
+            limb, segment, true_thigh)

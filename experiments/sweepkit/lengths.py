@@ -4,9 +4,10 @@ file whose limb segments have the refined lengths (each segment scaled about its
 the keypoints below it carried along), which ``ibik track --static`` then calibrates on.
 
 - "reach": every limb lengthened where its targets' 98th-percentile reach exceeds its segments' sum.
-- "images": the legs' lengths (one factor for both segments: the silhouettes, as the criteria read
-  them, tell a leg's length better than its split between thigh and shank) chosen on the views'
-  silhouettes around the PIK pose, pairs that cannot reach the targets excluded; the arms by reach
+- "images": the legs' lengths (one factor for both segments, as the criteria read the silhouettes)
+  chosen on the views' silhouettes around the PIK pose, pairs that cannot reach the targets
+  excluded, then each leg's split between thigh and shank (its sum kept) on the silhouettes' centre
+  lines, which do not depend on the limbs' widths (subject.split_cue); the arms by reach
   (the criteria put hanging arms against the trunk). One view sees no depth: there the legs too go
   by reach (on the sweep, one view's silhouettes took IBIK 1v knees from 34.0 to 36.2 mm).
 """
@@ -25,11 +26,13 @@ from ibik_pin.io.trc import TrcData, read_trc, write_trc
 from ibik_pin.readahead.frame_images import frame_images
 from ibik_pin.subject.calibration import calibrate_static_trial
 from ibik_pin.subject.scaling import keypoint_lengths, segment_lengths_from_keypoints
+from ibik_pin.subject.split_cue import refine_split
 from ibik_pin.subject.trial_lengths import DEFAULT_FACTORS, refine_from_images, refine_from_reach
 from ibik_pin.tasks.image import ImageTask
 from ibik_pin.tasks.silhouette_axis import SilhouetteAxisTask
 from ibik_pin.tracking.settings import TrackingSettings
 from ibik_pin.tracking.target_filter import filter_targets
+from ibik_pin.tracking.trunk import TRUNK_SECTION
 from ibik_pin.tracking.views import support_caps
 from ibik_pin.vision.camera import cameras_in_frame
 from sweepkit.conditions import ConditionInputs, _trc, drift_static
@@ -90,9 +93,14 @@ def oracle_static(inputs: ConditionInputs) -> tuple[Path, dict]:
 
 def image_static(inputs: ConditionInputs, estimate: TrcData, views: int, silhouettes: str,
                  settings: TrackingSettings | None = None, smoothing_frames: int = 3,
-                 factors: np.ndarray = LEG_FACTORS, target_filter: str | float = "off") -> tuple[Path, dict]:
+                 factors: np.ndarray = LEG_FACTORS, target_filter: str | float = "off",
+                 split: bool = True, arms: str = "reach") -> tuple[Path, dict]:
     """The static with the legs' lengths the first `views` cameras' silhouettes prefer around the
-    pose `estimate` (a PIK run's joints.trc), the arms' by reach."""
+    pose `estimate` (a PIK run's joints.trc), the arms' by reach: each leg's factor, then (`split`)
+    its split between thigh and shank on the centre lines (subject.split_cue.refine_split).
+
+    `arms="images"` (a trial, not kept: docs/sweep.md) chooses the arms' factor on the silhouettes
+    like the legs', no elbow inside the trunk."""
     if views < 2:
         path, report = reach_static(inputs, smoothing_frames, target_filter)
         return path, dict(report, evidence="one view: the reach only")
@@ -121,14 +129,20 @@ def image_static(inputs: ConditionInputs, estimate: TrcData, views: int, silhoue
             keypoints = {name: estimate.positions[frame, k] for k, name in enumerate(estimate.marker_names)}
             yield keypoints, [(image_task, 1.0), (axis_task, settings.axis_weight)]
 
-    legs = refine_from_images(body, model_lengths, frames(), factors=factors, limbs=("left_leg", "right_leg"),
-                              keep_ratio=True)
-    arms = refine_from_reach(model_lengths, targets.marker_names, targets.positions, limbs=("left_arm", "right_arm"),
-                             smoothing_frames=smoothing_frames)
+    on_images = ("left_leg", "right_leg") + (("left_arm", "right_arm") if arms == "images" else ())
+    legs = refine_from_images(body, model_lengths, frames(), factors=factors, limbs=on_images, keep_ratio=True,
+                              trunk_section=TRUNK_SECTION)
+    if split:
+        poses = [{name: estimate.positions[frame, k] for k, name in enumerate(estimate.marker_names)}
+                 for frame in range(estimate.positions.shape[0])]
+        legs = refine_split(body, legs, poses, source, cameras, centre)
+    by_reach = refine_from_reach(model_lengths, targets.marker_names, targets.positions,
+                                 limbs=("left_arm", "right_arm"), smoothing_frames=smoothing_frames)
     lengths = static_lengths(inputs)
     wanted = dict(lengths)
     for name in SEGMENT_CHILDREN:
-        refined = legs.lengths[name] if "thigh" in name or "shank" in name else arms.lengths[name]
+        on_silhouettes = "thigh" in name or "shank" in name or arms == "images"
+        refined = legs.lengths[name] if on_silhouettes else by_reach.lengths[name]
         wanted[name] = lengths[name] * refined / model_lengths[name]
     report = dict(_report(lengths, wanted), evidence=legs.evidence)
     suffix = "" if target_filter == "off" else f"_{target_filter}"

@@ -2,10 +2,13 @@
 
 A first pass without the image (PIK) puts every frame's limb ends on their targets; around that
 pose, subject.trial_lengths.refine_from_images tries one factor per leg on both its segments (the
-silhouettes tell a leg's length, not its split between thigh and shank: docs/sweep.md) and keeps
-the one whose knees, each at its best swivel, explain the views best. The arms go by the targets'
-reach (an arm hanging against the trunk is not told apart from it by the silhouettes). One view
-sees no depth: with fewer than two cameras the legs too go by reach. This is what the sweep's
+criteria's overlap favours a thick thigh, so they tell a leg's length, not its split) and keeps the
+one whose knees, each at its best swivel, explain the views best. Then each leg's split between
+thigh and shank, its sum kept, is chosen on the silhouettes' centre lines, which do not depend on
+the limbs' widths, with the knees where the first step put them (subject.split_cue.refine_split;
+docs/sweep.md). The arms go by the targets' reach (on the silhouettes, even with no elbow inside
+the trunk, the arms' lengths and the elbows came out worse). One view sees no depth: with fewer
+than two cameras the legs too go by reach. This is what the sweep's
 `--lengths images` does (experiments/sweepkit/lengths.py), inside `ibik track`.
 """
 
@@ -21,6 +24,7 @@ from ibik_pin.exceptions import IbikWarning
 from ibik_pin.model import BodyModel
 from ibik_pin.readahead.frame_images import frame_images
 from ibik_pin.subject.scaling import keypoint_lengths
+from ibik_pin.subject.split_cue import refine_split
 from ibik_pin.subject.trial_lengths import TrialLengths, refine_from_images, refine_from_reach
 from ibik_pin.tasks.image import ImageTask
 from ibik_pin.tasks.silhouette_axis import SilhouetteAxisTask
@@ -63,23 +67,26 @@ def refine_lengths_on_images(body: BodyModel, names: list[str], targets_m: np.nd
     axis_task = SilhouetteAxisTask(body)
 
     count = first_pass.keypoints.shape[0]
-    sampled = np.unique(np.linspace(0, count - 1, min(count, MOST_FRAMES)).round().astype(int))
+    sampled = [int(frame) for frame in np.unique(np.linspace(0, count - 1, min(count, MOST_FRAMES)).round())
+               if np.all(np.isfinite(first_pass.keypoints[int(frame)]))]
+
+    def pose(frame: int) -> dict[str, np.ndarray]:
+        return {name: first_pass.keypoints[frame, k] for k, name in enumerate(first_pass.keypoint_names)}
 
     def frames() -> Iterator:
         for frame in sampled:
-            if not np.all(np.isfinite(first_pass.keypoints[frame])):
-                continue
             images = frame_images(masks_of_frame, cameras, caps, scales, frame)
             image_task.set_views(images.views)
             axis_task.set_views(images.axis_views or [])
-            keypoints = {name: first_pass.keypoints[frame, k] for k, name in enumerate(first_pass.keypoint_names)}
-            yield keypoints, [(image_task, 1.0), (axis_task, settings.axis_weight)]
+            yield pose(frame), [(image_task, 1.0), (axis_task, settings.axis_weight)]
 
     # The run's own solve reads the same targets and silhouettes next and says what is wrong with
     # them, once per cause: said here too, each frame's empty view would be said again and again.
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", IbikWarning)
         legs = refine_from_images(body, lengths, frames(), limbs=LEGS, keep_ratio=True)
+        legs = refine_split(body, legs, [pose(frame) for frame in sampled],
+                            lambda index: masks_of_frame(sampled[index]), cameras, centre)
     arms = refine_from_reach(lengths, names, targets_m, limbs=ARMS)
     refined = dict(lengths)
     for limb_lengths in (legs, arms):

@@ -36,6 +36,7 @@ import numpy as np
 from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel, set_segment_length
 from ibik_pin.tasks.segments import SegmentCriterion
+from ibik_pin.tracking.trunk import TRUNK_KEYPOINTS, inside_trunk
 
 __all__ = ["DEFAULT_FACTORS", "LIMBS", "Limb", "TrialLengths", "apply_lengths", "reach_bounds",
            "refine_from_images", "refine_from_reach"]
@@ -77,11 +78,14 @@ class TrialLengths:
         before: the lengths given [m].
         evidence: per limb, what decided (e.g. {"kind": "images", "frames": 40, "factors": [1.03, 0.97],
             "gain": 0.12}).
+        middles: per limb refined on images, its middle joint (F, 3) [m] in each frame given, where
+            the chosen lengths and the criteria put it (the best swivel).
     """
 
     lengths: dict[str, float]
     before: dict[str, float]
     evidence: dict[str, dict] = field(default_factory=dict)
+    middles: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def changes(self) -> dict[str, float]:
@@ -197,12 +201,34 @@ def _candidates(root: np.ndarray, middle: np.ndarray, end: np.ndarray, uppers: n
     return points, reaches
 
 
+def _circle_radius(upper: float, lower: float, distance: float) -> float:
+    """The radius [m] of the circle a middle joint lies on between ends `distance` apart [m]
+    (0 where the segments cannot reach)."""
+    if upper + lower <= distance or distance <= 0.0:
+        return 0.0
+    along = (upper**2 - lower**2 + distance**2) / (2.0 * distance)
+    return float(np.sqrt(max(upper**2 - along**2, 0.0)))
+
+
 def _lower_factors(upper: np.ndarray, lower: np.ndarray | None, lengths: Mapping[str, float],
                    limb: Limb) -> np.ndarray:
     """The lower segment's factors of a grid; None: those that keep the limb's sum with `upper`."""
     if lower is not None:
         return lower
     return 1.0 + (1.0 - upper) * lengths[limb.upper] / lengths[limb.lower]
+
+
+def _inside_trunk(keypoints: Mapping[str, np.ndarray], limbs: Sequence[str], placements: Sequence[np.ndarray],
+                  section: tuple[float, ...] | None) -> list[np.ndarray]:
+    """Per limb, which of its middle-joint placements (G, A, 3) are elbows inside the trunk."""
+    inside = [np.zeros(points.shape[:2], dtype=bool) for points in placements]
+    if section is None or not all(name in keypoints for name in TRUNK_KEYPOINTS):
+        return inside
+    hip, neck, left_shoulder, right_shoulder = (np.asarray(keypoints[name], dtype=float) for name in TRUNK_KEYPOINTS)
+    for index, name in enumerate(limbs):
+        if LIMBS[name].middle in ("LElbow", "RElbow"):
+            inside[index] = inside_trunk(placements[index], hip, neck, left_shoulder, right_shoulder, section)
+    return inside
 
 
 def refine_from_images(
@@ -217,6 +243,8 @@ def refine_from_images(
     limbs: Sequence[str] | None = None,
     keep_ratio: bool = False,
     keep_sum: bool = False,
+    min_radius: float = 0.0,
+    trunk_section: tuple[float, ...] | None = None,
 ) -> TrialLengths:
     """Each limb's two lengths, chosen on a grid of factors, by how well the trial's silhouettes
     are explained with them.
@@ -244,6 +272,11 @@ def refine_from_images(
         keep_ratio: scale both segments of a limb by the same factor (the static's split kept).
         keep_sum: the factors on the upper segment only, the lower one taking up the difference (the
             limb's sum kept, its split between the two segments chosen).
+        min_radius: a frame scores a limb only if its middle joint's circle at the given lengths has
+            at least this radius [m]: a nearly straight limb shows its sum, not its split.
+        trunk_section: an elbow is never placed inside the trunk (tracking.trunk.inside_trunk with
+            these semi-axes, placed by the pose's TRUNK_KEYPOINTS): two views' silhouettes cover the
+            trunk's whole volume, so an arm laid into it scores as well as the true one.
 
     Returns:
         The lengths, the limbs' evidence (frames, factors chosen, gain, unreachable frames).
@@ -264,6 +297,8 @@ def refine_from_images(
     ids = {name: body.frame_ids([LIMBS[name].root, LIMBS[name].middle, LIMBS[name].end]) for name in chosen}
     scores = {name: np.zeros(grid_upper.size) for name in chosen}
     unreachable = {name: np.zeros(grid_upper.size) for name in chosen}
+    scored = dict.fromkeys(chosen, 0)
+    best_middles: dict[str, list[np.ndarray]] = {name: [] for name in chosen}  # per frame, (G, 3)
     count = 0
     frame_names = {int(frame_id): name for name, frame_id in zip(body.keypoints, body.frame_ids(list(body.keypoints)),
                                                                   strict=True)}
@@ -276,10 +311,12 @@ def refine_from_images(
 
     for keypoints, terms in frames:
         count += 1
-        moves, placements = [], []
+        moves, placements, bent = [], [], []
         for name in chosen:
             root, middle, end = positions_of(keypoints, ids[name])
             limb = LIMBS[name]
+            bent.append(_circle_radius(lengths[limb.upper], lengths[limb.lower],
+                                       float(np.linalg.norm(end - root))) >= min_radius)
             points, reaches = _candidates(root, middle, end, grid_upper * lengths[limb.upper],
                                           _lower_factors(grid_upper, grid_lower, lengths, limb) * lengths[limb.lower],
                                           int(swivels), reach_tolerance)
@@ -287,6 +324,7 @@ def refine_from_images(
             placements.append(points)
             moves.append(ids[name][1])
         values = np.zeros((len(chosen), grid_upper.size, int(swivels)))
+        forbidden = _inside_trunk(keypoints, chosen, placements, trunk_section)
         for task, weight in terms:
             if weight == 0.0 or not getattr(task, "enabled", True):
                 continue
@@ -302,10 +340,18 @@ def refine_from_images(
                 for index, limb_values in zip(movers, task.values_at_moves(current, pose, task_moves), strict=True):
                     values[index] += weight * np.asarray(limb_values).reshape(grid_upper.size, int(swivels))
         for index, name in enumerate(chosen):
-            scores[name] += values[index].max(axis=1)
+            # a pair whose every swivel is inside the trunk keeps them all (the pose's doing)
+            kept = ~forbidden[index] | forbidden[index].all(axis=1, keepdims=True)
+            allowed_values = np.where(kept, values[index], -np.inf)
+            best_swivels = allowed_values.argmax(axis=1)
+            best_middles[name].append(placements[index][np.arange(grid_upper.size), best_swivels])
+            if bent[index]:
+                scores[name] += allowed_values[np.arange(grid_upper.size), best_swivels]
+                scored[name] += 1
     before = {name: float(value) for name, value in lengths.items()}
     refined = dict(before)
     evidence = {}
+    middles = {}
     for name in chosen:
         if count == 0:
             break
@@ -322,11 +368,13 @@ def refine_from_images(
         lower = _lower_factors(grid_upper, grid_lower, before, limb)
         refined[limb.upper] = float(grid_upper[best]) * before[limb.upper]
         refined[limb.lower] = float(lower[best]) * before[limb.lower]
+        middles[name] = np.array(best_middles[name])[:, best]
         evidence[name] = {"kind": "images", "frames": count, "factors": [float(grid_upper[best]),
                                                                           float(lower[best])],
-                          "gain": gain, "calibrated_reaches": bool(allowed[identity]),
+                          "gain": gain, "scored_frames": scored[name],
+                          "calibrated_reaches": bool(allowed[identity]),
                           "unreachable_frames_calibrated": int(unreachable[name][identity])}
-    return TrialLengths(refined, before, evidence)
+    return TrialLengths(refined, before, evidence, middles)
 
 
 def apply_lengths(body: BodyModel, refined: TrialLengths) -> BodyModel:
