@@ -63,12 +63,14 @@ def run_condition_variant(inputs: ConditionInputs, name: str, silhouettes: str, 
                           static: Path | None = None, target_filter: str | float = "off") -> SweepRun:
     """``ibik track`` on the condition's files with the variant (IBIK: the first N cameras;
     realdata.runner.run_variant); `static`: another static file than the condition's;
-    `target_filter`: ``--target-filter``."""
+    `target_filter`: ``--target-filter``. The static already holds the lengths the sweep's
+    ``--lengths`` chose (sweepkit/lengths.py), so ``ibik track`` runs with ``--trial-lengths off``:
+    each variant's lengths are refined once, and the oracle's are the trial's own."""
     chosen = variant(name)
     scratch = Path(tempfile.mkdtemp(prefix="sweep_"))
     try:
         result = run_variant(dataclasses.replace(inputs, static_path=static), chosen, silhouettes, overrides,
-                             scratch / "run", target_filter=target_filter)
+                             scratch / "run", target_filter=target_filter, trial_lengths="off")
         estimate = read_trc(scratch / "run" / "joints.trc").in_metres()
     finally:
         shutil.rmtree(scratch, ignore_errors=True)

@@ -32,7 +32,7 @@ from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
 from ibik_pin.tasks.segments import SegmentCriterion
-from ibik_pin.tracking.arm_support import cap_arm_overlap, outside_counts
+from ibik_pin.tracking.arm_support import ARM_CAP, cap_arm_overlap, outside_counts
 from ibik_pin.tracking.trunk import TRUNK_KEYPOINTS, TRUNK_SECTION, farther_from_axis, inside_trunk, trunk_distance
 from ibik_pin.tracking.views import LIMB_HALF_WIDTH
 
@@ -193,9 +193,10 @@ class SwivelSearch:
             (tracking.arm_support) is searched on the latter: the body-wide cap rewards an arm over
             the trunk more than on its own thinner silhouette. Everywhere instead, walking elbows
             that the body-wide overlap had kept went where the silhouette-axis term alone put them
-            (docs/sweep.md, "The elbows' tail"). None (default): the image task's values; the 2-view
-            sweep with tracking.arm_support.ARM_CAP improved the elbows' tail but lost 8-13 mm on
-            walk131_01's hanging arms (docs/sweep.md), so it is not the default.
+            (docs/sweep.md, "The elbows' tail"). Default tracking.arm_support.ARM_CAP: on the 2-view
+            sweep (42 conditions) the elbows went 18.7 / 36.1 -> 17.3 / 32.1 mm clean and the 90th
+            percentile 44.7 -> 38.3 with defects, worse by more than 1 mm in 2 (walk131_01's
+            hanging arms, up to 13 mm); real motion within 1.7 mm. None: the image task's values.
     """
 
     body: BodyModel
@@ -209,7 +210,7 @@ class SwivelSearch:
     trunk_section: tuple[float, ...] | None = TRUNK_SECTION
     keep_unrefuted: bool = True
     nearer_section: tuple[float, ...] = NEARER_SECTION
-    arm_cap: float | None = None
+    arm_cap: float | None = ARM_CAP
 
     def __post_init__(self) -> None:
         if int(self.samples) < 3:
