@@ -50,14 +50,7 @@ def swivel_profile(tracker, configuration) -> dict[str, np.ndarray]:
     roots, middles, ends = configuration.frame_positions(ids.reshape(-1)).reshape(-1, 3, 3).transpose(1, 0, 2)
     circle = _circles(roots, middles, ends)
     points = circle.at(_even(PROFILE_SAMPLES))
-    poses = []
-    for task, weight in search.terms:
-        if weight == 0.0 or not getattr(task, "enabled", True):
-            poses.append(None)
-            continue
-        current = configuration.frame_positions(task.frame_ids)
-        poses.append((current, task.at_pose(current)))
-    weighted, _ = search._weighted(poses, ids[:, 1], points)
+    weighted, _ = search._weighted(search._term_poses(configuration), ids[:, 1], points)
     trunk = configuration.frame_positions(search._trunk_ids)
     return {"terms": weighted, "trunk_points": trunk, "centre": circle.centre, "radius": circle.radius,
             "capped": {cap: arm_overlap(tracker.image_task, roots, points, ends, cap) for cap in ARM_CAPS},

@@ -7,39 +7,23 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from ibik_pin.app.demo import DATA
 from ibik_pin.configuration import Configuration
-from ibik_pin.evaluation import ESTIMATED
 from ibik_pin.exceptions import InputError
-from ibik_pin.human import load_human
-from ibik_pin.io.asf_amc import read_asf_amc
-from ibik_pin.subject.scaling import scale_human, segment_lengths_from_keypoints
-from ibik_pin.synthetic.mocap import keypoints_from_motion, pose_model_to_keypoints
-from ibik_pin.synthetic.rig import humaneva_rig
-from ibik_pin.synthetic.silhouettes import render_silhouettes
 from ibik_pin.tasks import FramePositionTask
 from ibik_pin.tracking.search_cadence import SearchCadence
 from ibik_pin.tracking.settings import TrackingSettings
 from ibik_pin.tracking.swivel import LIMB_ENDS
 from ibik_pin.tracking.tracker import Tracker
 from tests.conftest import random_human_configuration
+from tests.walking_clip import walking_clip
 
 FREE = list(LIMB_ENDS)
 
 
 @pytest.fixture(scope="module")
 def walking():
-    """30 frames of CMU 35_01 (the demo's walking, every second frame at 60 Hz): the scaled model,
-    3 HumanEva-like cameras (two of them cross: the search runs), the model's silhouettes posed on
-    the mocap, and the targets (every keypoint but the elbows and knees)."""
-    motion = read_asf_amc(DATA / "35.asf", DATA / "35_01_first240.amc").subset(slice(0, 60, 2))
-    names, positions = keypoints_from_motion(motion, "asf")
-    body = scale_human(load_human(), segment_lengths_from_keypoints(names, positions))
-    q, _ = pose_model_to_keypoints(body, names, positions)
-    cameras = humaneva_rig(3, np.nanmean(positions[:, names.index("Hip")], axis=0), seed=0)
-    masks = [render_silhouettes(body, pose, cameras) for pose in q]
-    kept = [k for k, name in enumerate(names) if name not in ESTIMATED]
-    return body, cameras, masks, [names[k] for k in kept], positions[:, kept]
+    """The rendered walking with 3 views (two of them cross: the search runs), without the truth."""
+    return walking_clip(3)[:5]
 
 
 class EveryLimbEveryFrame(Tracker):

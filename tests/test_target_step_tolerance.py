@@ -4,33 +4,17 @@ converged, and the motion stays where every step leaves it."""
 import numpy as np
 import pytest
 
-from ibik_pin.app.demo import DATA
 from ibik_pin.evaluation import ESTIMATED
 from ibik_pin.exceptions import InputError
-from ibik_pin.human import load_human
-from ibik_pin.io.asf_amc import read_asf_amc
-from ibik_pin.subject.scaling import scale_human, segment_lengths_from_keypoints
-from ibik_pin.synthetic.mocap import keypoints_from_motion, pose_model_to_keypoints
-from ibik_pin.synthetic.rig import humaneva_rig
-from ibik_pin.synthetic.silhouettes import render_silhouettes
 from ibik_pin.tracking.settings import TrackingSettings
 from ibik_pin.tracking.tracker import Tracker
+from tests.walking_clip import walking_clip
 
 
 @pytest.fixture(scope="module")
 def walking():
-    """30 frames of CMU 35_01 (the demo's walking, every second frame at 60 Hz): the scaled model,
-    2 HumanEva-like cameras, the model's silhouettes posed on the mocap, the targets (every keypoint
-    but the elbows and knees) and the mocap's elbows and knees."""
-    motion = read_asf_amc(DATA / "35.asf", DATA / "35_01_first240.amc").subset(slice(0, 60, 2))
-    names, positions = keypoints_from_motion(motion, "asf")
-    body = scale_human(load_human(), segment_lengths_from_keypoints(names, positions))
-    q, _ = pose_model_to_keypoints(body, names, positions)
-    cameras = humaneva_rig(2, np.nanmean(positions[:, names.index("Hip")], axis=0), seed=0)
-    masks = [render_silhouettes(body, pose, cameras) for pose in q]
-    kept = [k for k, name in enumerate(names) if name not in ESTIMATED]
-    truth = positions[:, [names.index(name) for name in ESTIMATED]]
-    return body, cameras, masks, [names[k] for k in kept], positions[:, kept], truth
+    """The rendered walking with 2 views, and the mocap's elbows and knees."""
+    return walking_clip(2)
 
 
 def _track(walking, tolerance):

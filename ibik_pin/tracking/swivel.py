@@ -277,6 +277,12 @@ class SwivelSearch:
             rows = self._term_rows[(task, frame_id)] = np.flatnonzero(task.frame_ids == frame_id)
         return rows
 
+    def _term_poses(self, configuration: Configuration) -> list[tuple[np.ndarray, object] | None]:
+        """Each term's frames at the pose and its state there (None: the term is left out)."""
+        current = [configuration.frame_positions(task.frame_ids) if weight != 0.0 and getattr(task, "enabled", True)
+                   else None for task, weight in self.terms]
+        return [None if c is None else (c, task.at_pose(c)) for (task, _), c in zip(self.terms, current, strict=True)]
+
     def _weighted(self, poses: list, middle_ids: np.ndarray,
                   circles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Each term's weighted value (T, L, C) with each limb's middle joint at each of its
@@ -321,13 +327,7 @@ class SwivelSearch:
         circle = _circles(roots[chosen], middles[chosen], ends[chosen])
         circles = circle.at(_even(samples))  # (L', C, 3)
         # Each term at the frame's pose once, and every limb's candidates in one call per term.
-        poses: list[tuple[np.ndarray, object] | None] = []
-        for task, weight in self.terms:
-            if weight == 0.0 or not getattr(task, "enabled", True):
-                poses.append(None)
-                continue
-            current = configuration.frame_positions(task.frame_ids)
-            poses.append((current, task.at_pose(current)))
+        poses = self._term_poses(configuration)
         weighted, present = self._weighted(poses, limb_ids[chosen, 1], circles)
         elbows = np.array([limbs[limb] in ("LElbow", "RElbow") for limb in chosen])
         arm_cap = self.arm_cap
