@@ -71,14 +71,14 @@ class StageRecorder:
     def __enter__(self) -> StageRecorder:
         recorder, original = self, self._original
 
-        def recording(tracker, configuration, free):
+        def recording(tracker, configuration, free, frame):
             ids = tracker.body.frame_ids(list(ELBOWS))
             before = configuration.frame_positions(ids).copy()
             hints = tracker.swivel.hints(configuration, free)
             recorder.frames.append({"before": before, "hints": {k: v.copy() for k, v in hints.items()}})
             if recorder.profiles:
                 recorder.frames[-1]["profile"] = swivel_profile(tracker, configuration)
-            return original(tracker, configuration, free)
+            return original(tracker, configuration, free, frame)
 
         tracker_module.Tracker._swivel_hints = recording
         return self
