@@ -46,7 +46,9 @@ LENGTHS = ("static", "reach", "images", "oracle")
 LEG_FACTORS = DEFAULT_FACTORS
 
 
-def _write_static(inputs: ConditionInputs, lengths: dict[str, float], wanted: dict[str, float], name: str) -> Path:
+def write_static(inputs: ConditionInputs, lengths: dict[str, float], wanted: dict[str, float], name: str) -> Path:
+    """The condition's static with each limb segment scaled from its `lengths` [m] (the static's own)
+    to the `wanted` ones, written beside its files as static_<name>.trc."""
     static = read_trc(inputs.static).in_metres()
     factors = {SEGMENT_CHILDREN[segment]: wanted[segment] / lengths[segment] for segment in SEGMENT_CHILDREN
                if segment in lengths and segment in wanted}
@@ -81,14 +83,14 @@ def reach_static(inputs: ConditionInputs, smoothing_frames: int = 3,
     targets = trial_targets(inputs, target_filter)
     refined = refine_from_reach(lengths, targets.marker_names, targets.positions, smoothing_frames=smoothing_frames)
     name = "reach" if target_filter == "off" else f"reach_{target_filter}"
-    return _write_static(inputs, lengths, refined.lengths, name), _report(lengths, refined.lengths)
+    return write_static(inputs, lengths, refined.lengths, name), _report(lengths, refined.lengths)
 
 
 def oracle_static(inputs: ConditionInputs) -> tuple[Path, dict]:
     """The static with the trial's true limb lengths (a diagnostic: what lengths are worth)."""
     lengths = static_lengths(inputs)
     wanted = segment_lengths_from_keypoints(inputs.truth_names, inputs.truth)
-    return _write_static(inputs, lengths, wanted, "oracle"), _report(lengths, wanted)
+    return write_static(inputs, lengths, wanted, "oracle"), _report(lengths, wanted)
 
 
 def image_static(inputs: ConditionInputs, estimate: TrcData, views: int, silhouettes: str,
@@ -146,4 +148,4 @@ def image_static(inputs: ConditionInputs, estimate: TrcData, views: int, silhoue
         wanted[name] = lengths[name] * refined / model_lengths[name]
     report = dict(_report(lengths, wanted), evidence=legs.evidence)
     suffix = "" if target_filter == "off" else f"_{target_filter}"
-    return _write_static(inputs, lengths, wanted, f"images{views}v_{silhouettes}{suffix}"), report
+    return write_static(inputs, lengths, wanted, f"images{views}v_{silhouettes}{suffix}"), report
