@@ -116,7 +116,7 @@ def condition_row(inputs: ConditionInputs, views: int) -> dict:
 def summarize(rows: list[dict]) -> dict:
     """Per variant and group: median and 90th percentile over conditions [mm], and the paired
     changes against as run (median, better and worse by more than 1 mm)."""
-    summary = {}
+    summary: dict[str, dict] = {}
     for name in VARIANTS:
         summary[name] = {}
         for group in GROUPS:
@@ -135,7 +135,8 @@ def markdown(summary: dict, header: str) -> str:
         cells = []
         for group in GROUPS:
             g = groups[group]
-            cells += [f"{g['median']:.1f} / {g['p90']:.1f}", f"{g['change_median']:+.1f}", f"{g['better']} / {g['worse']}"]
+            cells += [f"{g['median']:.1f} / {g['p90']:.1f}", f"{g['change_median']:+.1f}",
+                      f"{g['better']} / {g['worse']}"]
         lines.append(f"| {name.replace('_', ' ')} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
@@ -164,7 +165,8 @@ def main(argv: list[str] | None = None) -> dict:
         print(f"{index:3d} {condition.motion[:14]:14s} " + "  ".join(
             f"{name[:12]} {row[name]['elbows']:5.1f}/{row[name]['knees']:5.1f}" for name in VARIANTS), flush=True)
     summary = summarize(rows)
-    header = (f"# Where the error comes from (`python experiments/error_sources.py {' '.join(argv or sys.argv[1:])}`)\n\n"
+    command = " ".join(argv or sys.argv[1:])
+    header = (f"# Where the error comes from (`python experiments/error_sources.py {command}`)\n\n"
               f"{len(rows)} sweep conditions (seed {arguments.seed}), IBIK {arguments.views} views, clean silhouettes. "
               "Each cell: median / 90th percentile over conditions [mm]; change: the median of the paired change "
               "against as run; better / worse: conditions changed by more than 1 mm. "
