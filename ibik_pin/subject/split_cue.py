@@ -153,10 +153,11 @@ def _clearance_px(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
 
 
 
-#: Factors tried on a thigh, its shank taking up the difference: +-3 % by 1 % (a static's split was
+#: Factors tried on a thigh, its shank taking up the difference: +-3 % by 0.5 % (a static's split was
 #: off by up to 8 %, but the cue's own errors reach 20-35 mm on a few legs and a wider grid let them
-#: through: on the sweep's conditions 0-13, +-8 % made the legs' mean error 6.0 -> 7.1 mm, +-3 % 4.9).
-SPLIT_FACTORS = np.linspace(0.97, 1.03, 7)
+#: through: on the sweep's conditions 0-13, +-8 % made the legs' mean error 6.0 -> 7.1 mm, +-3 % 4.9;
+#: steps of 0.5 % rather than 1 % with the leg's sum by 0.5 %: knees better on the sweep, docs/sweep.md).
+SPLIT_FACTORS = np.linspace(0.97, 1.03, 13)
 #: A frame scores a leg's split only if its knee's circle has this radius [m] (the swivel search's bound).
 MIN_RADIUS = 0.08
 #: The cue's robust scale and the clearance another segment keeps from a sample read [m], at the

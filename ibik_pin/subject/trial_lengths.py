@@ -65,8 +65,10 @@ LIMBS: dict[str, Limb] = {
 SEGMENT_JOINTS = {f"{side}_{segment}": f"{side}_{joint}" for side in ("left", "right")
                   for segment, joint in (("thigh", "knee_Z"), ("shank", "ankle_Y"), ("upper_arm", "elbow_Z"),
                                          ("forearm", "wrist_Z"))}
-#: Factors tried on each calibrated length: +-6 %, by 1.5 % (a static take was seen 3-7 % off).
-DEFAULT_FACTORS = np.linspace(0.94, 1.06, 9)
+#: Factors tried on each calibrated length: +-6 % (a static take was seen 3-7 % off), by 0.5 %. A
+#: leg's knee moves far for a small error of its sum when nearly straight; on the sweep, steps of
+#: 1.5 % (13 mm on a leg's sum) left the sums 4.3 mm off at the median, 0.5 % 3.6 (docs/sweep.md).
+DEFAULT_FACTORS = np.linspace(0.94, 1.06, 25)
 
 
 @dataclass
