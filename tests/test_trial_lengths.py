@@ -6,7 +6,13 @@ import pytest
 from ibik_pin.exceptions import InputError
 from ibik_pin.human import load_human
 from ibik_pin.subject.scaling import keypoint_lengths
-from ibik_pin.subject.trial_lengths import apply_lengths, reach_bounds, refine_from_images, refine_from_reach
+from ibik_pin.subject.trial_lengths import (
+    MIN_GAIN,
+    apply_lengths,
+    reach_bounds,
+    refine_from_images,
+    refine_from_reach,
+)
 from ibik_pin.tracking.trunk import TRUNK_SECTION, inside_trunk
 
 NAMES = ["LHip", "LKnee", "LAnkle"]
@@ -127,6 +133,34 @@ def test_keeping_the_sum_moves_the_knee_along_the_leg_and_keeps_thigh_plus_shank
                                                                         / calibrated["left_shank"], rel=1e-12)
     with pytest.raises(InputError, match="choose one"):
         refine_from_images(_Body(), calibrated, frames, keep_sum=True, keep_ratio=True)
+
+
+def _knee_with_lengths(leg: np.ndarray, factor: float) -> np.ndarray:
+    """Where the knee of a leg whose segments are `factor` times THIGH and SHANK lies between the
+    leg's hip and ankle, on the side of its own knee."""
+    hip, knee, ankle = leg
+    axis = (ankle - hip) / np.linalg.norm(ankle - hip)
+    distance = float(np.linalg.norm(ankle - hip))
+    radial = (knee - hip) - ((knee - hip) @ axis) * axis
+    radial /= np.linalg.norm(radial)
+    thigh, shank = factor * THIGH, factor * SHANK
+    along = (distance**2 + thigh**2 - shank**2) / (2.0 * distance)
+    return hip + along * axis + np.sqrt(thigh**2 - along**2) * radial
+
+
+@pytest.mark.parametrize(("truth", "moves"), [(1.003, False), (1.004, True)])
+def test_a_preference_below_the_minimum_gain_keeps_the_calibrated_lengths(truth, moves):
+    legs = _leg(30, np.linspace(20.0, 70.0, 30))
+    # The knees of legs 0.3 % (0.4 %) longer: nearest the grid's 1.005, but 1.0 scores almost as well.
+    frames = [({"LHip": leg[0], "LKnee": leg[1], "LAnkle": leg[2]}, [(_PeakAt(_knee_with_lengths(leg, truth)), 1.0)])
+              for leg in legs]
+    calibrated = {"left_thigh": THIGH, "left_shank": SHANK}
+    refined = refine_from_images(_Body(), calibrated, frames, keep_ratio=True, swivels=360)
+    gain = refined.evidence["left_leg"]["gain"]
+    assert (gain > MIN_GAIN) is moves
+    assert refined.evidence["left_leg"]["factors"][0] == pytest.approx(1.005 if moves else 1.0)
+    anyway = refine_from_images(_Body(), calibrated, frames, keep_ratio=True, swivels=360, min_gain=0.0)
+    assert anyway.evidence["left_leg"]["factors"][0] == pytest.approx(1.005)
 
 
 def test_bad_arguments_are_refused_with_what_was_expected():
