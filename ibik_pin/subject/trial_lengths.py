@@ -70,9 +70,9 @@ SEGMENT_JOINTS = {f"{side}_{segment}": f"{side}_{joint}" for side in ("left", "r
 #: 1.5 % (13 mm on a leg's sum) left the sums 4.3 mm off at the median, 0.5 % 3.6 (docs/sweep.md).
 DEFAULT_FACTORS = np.linspace(0.94, 1.06, 25)
 #: How much of the scores' spread over the grid the best pair must gain on the calibrated lengths to
-#: replace them: 1/200. On steps of 0.5 % a preference of a thousandth of the spread moved a leg
-#: whose static was exact (the real-motion benchmark's cmu35_01, a walking test): its sum 4 mm long
-#: and its knee 5-6 mm worse. A nearly straight knee moves far for a small error of the sum.
+#: replace them: 1/200. On steps of 0.5 % a preference of a thousandth of the spread moved legs
+#: whose static was exact (the real-motion benchmark's cmu35_01, the test suite's walking run): a sum
+#: 4 mm long, a knee 5-6 mm worse. A nearly straight knee moves far for a small error of the sum.
 MIN_GAIN = 0.005
 
 
