@@ -29,7 +29,7 @@ from sweepkit.runs import run_condition_variant
 
 from ibik_pin.tracking import tracker as tracker_module
 from ibik_pin.tracking.arm_support import arm_overlap
-from ibik_pin.tracking.swivel import SwivelSearch, _circles, _even, outside_counts, trunk_distance
+from ibik_pin.tracking.swivel import SwivelSearch, _even, limb_circles, outside_counts, trunk_distance
 
 ELBOWS = {"LElbow": ("LShoulder", "LWrist"), "RElbow": ("RShoulder", "RWrist")}
 #: Swivels at which the criterion is read on each elbow's circle per frame (--profiles).
@@ -48,7 +48,7 @@ def swivel_profile(tracker, configuration) -> dict[str, np.ndarray]:
     search = tracker.swivel
     ids = np.array([search._limb_frame_ids(name) for name in ELBOWS])
     roots, middles, ends = configuration.frame_positions(ids.reshape(-1)).reshape(-1, 3, 3).transpose(1, 0, 2)
-    circle = _circles(roots, middles, ends)
+    circle = limb_circles(roots, middles, ends)
     points = circle.at(_even(PROFILE_SAMPLES))
     weighted, _ = search._weighted(search._term_poses(configuration), ids[:, 1], points)
     trunk = configuration.frame_positions(search._trunk_ids)

@@ -33,7 +33,7 @@ import numpy as np
 from ibik_pin.configuration import Configuration
 from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
-from ibik_pin.tracking.swivel import LIMB_ENDS
+from ibik_pin.tracking.swivel import LIMB_ENDS, limb_circles
 
 __all__ = ["TURN_DEG", "SearchCadence"]
 
@@ -113,9 +113,7 @@ class SearchCadence:
         rows = np.array([self._offset[name] for name in limbs])
         roots, middles, ends = configuration.frame_positions(self._ids[rows].reshape(-1)).reshape(
             -1, 3, 3).transpose(1, 0, 2)
-        axis = ends - roots
-        along = np.einsum("li,li->l", middles - roots, axis) / np.maximum(np.einsum("li,li->l", axis, axis), 1e-18)
-        radius = np.linalg.norm(middles - roots - along[:, None] * axis, axis=1)
+        radius = limb_circles(roots, middles, ends).radius
         return {name: float(value) for name, value in zip(limbs, radius, strict=True)}
 
     def _trunk_lines(self, configuration: Configuration) -> np.ndarray:

@@ -36,8 +36,8 @@ from ibik_pin.tracking.arm_support import ARM_CAP, cap_arm_overlap, outside_coun
 from ibik_pin.tracking.trunk import TRUNK_KEYPOINTS, TRUNK_SECTION, farther_from_axis, inside_trunk, trunk_distance
 from ibik_pin.tracking.views import LIMB_HALF_WIDTH
 
-__all__ = ["LIMB_ENDS", "TRUNK_SECTION", "SwivelSearch", "inside_trunk", "outside_counts", "swivel_circle",
-           "trunk_distance", "views_cross"]
+__all__ = ["LIMB_ENDS", "TRUNK_SECTION", "SwivelSearch", "inside_trunk", "limb_circles", "outside_counts",
+           "swivel_circle", "trunk_distance", "views_cross"]
 
 #: Middle joint -> the two limb ends it swivels between.
 LIMB_ENDS: dict[str, tuple[str, str]] = {
@@ -82,7 +82,7 @@ class _Circles(NamedTuple):
         return points
 
 
-def _circles(root: np.ndarray, middle: np.ndarray, end: np.ndarray) -> _Circles:
+def limb_circles(root: np.ndarray, middle: np.ndarray, end: np.ndarray) -> _Circles:
     """The swivel circles of limbs (L, 3) each (the search places two sets of points on them)."""
     axis = end - root
     length = np.sqrt(np.einsum("li,li->l", axis, axis))
@@ -117,7 +117,7 @@ def swivel_circle(root: np.ndarray, middle: np.ndarray, end: np.ndarray, count: 
     """
     root, middle, end = (np.asarray(point, dtype=float) for point in (root, middle, end))
     single = root.ndim == 1
-    circles = _circles(*(np.atleast_2d(point) for point in (root, middle, end))).at(
+    circles = limb_circles(*(np.atleast_2d(point) for point in (root, middle, end))).at(
         _even(count) if angles is None else angles)
     return circles[0] if single else circles
 
@@ -324,7 +324,7 @@ class SwivelSearch:
         if chosen.size == 0:
             return {}
         samples = int(self.samples)
-        circle = _circles(roots[chosen], middles[chosen], ends[chosen])
+        circle = limb_circles(roots[chosen], middles[chosen], ends[chosen])
         circles = circle.at(_even(samples))  # (L', C, 3)
         # Each term at the frame's pose once, and every limb's candidates in one call per term.
         poses = self._term_poses(configuration)
