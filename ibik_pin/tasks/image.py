@@ -271,8 +271,13 @@ class ImageTask(SegmentCriterion):
 
     def _support_values(self, points: np.ndarray) -> list[np.ndarray]:
         """Per view, the support at (C, M, 3) points [m] (0 behind the camera), shape (C, M)."""
-        flat = np.ascontiguousarray(points).reshape(-1, 3)
-        return [support_at(view, flat, projected=projected).reshape(points.shape[:2])
+        return [values.reshape(points.shape[:2]) for values in self.supports_at(points.reshape(-1, 3))]
+
+    def supports_at(self, points: np.ndarray) -> list[np.ndarray]:
+        """Per enabled view, the support at world points (N, 3) [m] (0 behind the camera), shape
+        (N,): every view's projection in one call."""
+        flat = np.ascontiguousarray(points, dtype=float)
+        return [support_at(view, flat, projected=projected)
                 for view, projected in zip(self._active_views, self._pixels(flat), strict=True)]
 
     def inside_silhouettes(self, points: np.ndarray, tolerance_px: float = 2.0) -> np.ndarray:

@@ -25,7 +25,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from ibik_pin.tasks.image import ImageTask, support_at
+from ibik_pin.tasks.image import ImageTask
 
 __all__ = ["ARM_CAP", "REFUTE_SAMPLES", "arm_overlap", "cap_arm_overlap", "outside_counts"]
 
@@ -48,11 +48,10 @@ def arm_overlap(image: ImageTask, roots: np.ndarray, middles: np.ndarray, ends: 
     points = np.concatenate([root + fractions[:, None] * (middle - root),
                              middle + fractions[:, None] * (end - middle)], axis=2)  # (L, C, 2 count, 3)
     total = np.zeros(middles.shape[:2])
-    for view in views:
+    for view, read in zip(views, image.supports_at(points.reshape(-1, 3)), strict=True):
         caps = np.asarray(view.camera.pixel_radius(roots, np.full(len(roots), float(cap))), dtype=float)
         caps = np.where(np.isfinite(caps), np.maximum(caps, 1.0), np.inf)  # a root behind the camera: no cap
-        read = support_at(view, points.reshape(-1, 3)).reshape(points.shape[:3])
-        total += np.minimum(read, caps[:, None, None]).sum(axis=2)
+        total += np.minimum(read.reshape(points.shape[:3]), caps[:, None, None]).sum(axis=2)
     return total / (len(image.segments) * count * max(len(views), 1))
 
 
