@@ -27,11 +27,11 @@ import argparse
 import json
 import sys
 import time
-import tomllib
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
+import tomllib
 from error_sources import chosen_static
 from realdata.runner import DEFAULT_DATA
 from sweepkit.conditions import draw_condition, load_condition, write_condition
@@ -56,7 +56,7 @@ def posture_stack(**posture: object) -> Stack:
 
 
 VARIANTS = {
-    "base": lambda: {},
+    "base": dict,
     "iterations_5": lambda: {"iterations": 5},
     "iterations_6": lambda: {"iterations": 6},
     "iterations_8": lambda: {"iterations": 8},
