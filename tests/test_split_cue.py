@@ -7,7 +7,7 @@ import pytest
 
 from ibik_pin.exceptions import InputError
 from ibik_pin.human import load_human
-from ibik_pin.subject.split_cue import CLEARANCE_M, MIN_RADIUS, ROBUST_SCALE_M, AxisDistanceCue
+from ibik_pin.subject.split_cue import CLEARANCE_M, FLAT_BEYOND, MIN_RADIUS, ROBUST_SCALE_M, AxisDistanceCue
 from ibik_pin.subject.trial_lengths import refine_from_images
 from ibik_pin.vision.camera import OrthographicCamera
 from ibik_pin.vision.medial_axis import axis_distance_image
@@ -83,3 +83,20 @@ def test_the_centre_line_image_is_the_distance_to_a_band_s_middle():
     assert np.isinf(axis_distance_image(np.zeros((5, 5), bool))).all()
     with pytest.raises(InputError, match="2D"):
         axis_distance_image(np.zeros(5))
+
+
+def test_within_a_margin_the_centre_line_image_is_the_whole_image_s_and_beyond_it_the_cost_is_flat():
+    rng = np.random.default_rng(4)
+    for _ in range(20):
+        mask = np.zeros((160, 220), np.uint8)
+        for _ in range(int(rng.integers(1, 4))):
+            cv2.ellipse(mask, (int(rng.integers(20, 200)), int(rng.integers(20, 140))),
+                        (int(rng.integers(4, 30)), int(rng.integers(4, 50))), float(rng.uniform(0, 180)), 0, 360, 1, -1)
+        whole = axis_distance_image(mask)
+        for margin in (0.0, 6.5, 25.0):
+            windowed = axis_distance_image(mask, within_px=margin)
+            computed = np.isfinite(windowed)
+            assert np.array_equal(windowed[computed], whole[computed])
+            assert (whole[~computed] >= margin).all()
+    # The cue reads 1 - exp(-(d / c)^2): beyond FLAT_BEYOND robust scales it is 1.0 to the bit, as at +inf.
+    assert 1.0 - np.exp(-(FLAT_BEYOND ** 2)) == 1.0

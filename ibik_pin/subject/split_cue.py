@@ -33,7 +33,7 @@ from ibik_pin.subject.trial_lengths import LIMBS, TrialLengths, refine_from_imag
 from ibik_pin.vision.camera import CameraLike
 from ibik_pin.vision.medial_axis import axis_distance_image
 
-__all__ = ["CLEARANCE_M", "LOWER_SPAN", "MIN_RADIUS", "ROBUST_SCALE_M", "SPLIT_FACTORS", "UPPER_SPAN",
+__all__ = ["CLEARANCE_M", "FLAT_BEYOND", "LOWER_SPAN", "MIN_RADIUS", "ROBUST_SCALE_M", "SPLIT_FACTORS", "UPPER_SPAN",
            "AxisDistanceCue", "refine_split"]
 
 #: Fractions of each segment read, from its root end: the thigh's upper part merges with the pelvis
@@ -164,6 +164,9 @@ MIN_RADIUS = 0.08
 #: subject's distance: about a limb's radius, and two.
 ROBUST_SCALE_M = 0.05
 CLEARANCE_M = 0.15
+#: Robust scales beyond which a sample's cost 1 - exp(-(d / c)^2) is 1.0 in float64 (from 6.12 c on):
+#: the views' centre-line distances are computed only that far around the silhouette (the same costs).
+FLAT_BEYOND = 7.0
 
 
 def refine_split(body: BodyModel, legs: TrialLengths, poses: Sequence[Mapping[str, np.ndarray]],
@@ -191,7 +194,9 @@ def refine_split(body: BodyModel, legs: TrialLengths, poses: Sequence[Mapping[st
 
     def frames() -> Iterator:
         for index, pose in enumerate(poses):
-            cue.set_views(cameras, [axis_distance_image(mask) for mask in masks_of_pose(index)], robust, clearance)
+            cue.set_views(cameras, [axis_distance_image(mask, within_px=FLAT_BEYOND * scale)
+                                    for mask, scale in zip(masks_of_pose(index), robust, strict=True)],
+                          robust, clearance)
             placed = dict(pose)
             placed.update({LIMBS[name].middle: legs.middles[name][index] for name in chosen})
             yield placed, [(cue, 1.0)]
