@@ -156,3 +156,29 @@ def test_keep_subject_keeps_the_parts_holding_a_target():
     assert not kept[:, 40:].any()
     assert not keep_subject(mask, np.array([[40.0, 55.0]]), np.array([2.0])).any()
     assert not keep_subject(mask, np.full((1, 2), np.nan), np.array([2.0])).any()
+
+
+def test_every_frame_and_labelling_at_once_scores_as_each_frame_triangulated_alone(cameras, body):
+    """The left/right choice scores all frames and labellings in one triangulation: each score is
+    the one the frame's own triangulation of its left and right landmarks gives, to the bit (noisy
+    pixels, a missing view, low weights)."""
+    from ibik_pin.vision.triangulation import _LEFT, _RIGHT, _labelling_errors, _swap_sides
+
+    points, _ = body
+    rng = np.random.default_rng(7)
+    pixels = project_all(cameras, points) + rng.normal(0.0, 3.0, (len(cameras), *points.shape[:2], 2))
+    pixels[1, 3] = np.nan  # a view without the person in one frame
+    weights = np.where(np.isfinite(pixels[..., 0]), rng.uniform(0.0, 1.0, pixels.shape[:3]), 0.0)
+    labellings = [(False, a, b, c) for a in (False, True) for b in (False, True) for c in (False, True)]
+    cap, sides = 0.5, _LEFT + _RIGHT
+    batched = _labelling_errors(cameras, pixels, weights, labellings, cap)
+    for frame in range(points.shape[0]):
+        for index, flags in enumerate(labellings):
+            labelled = np.array([_swap_sides(pixels[v, frame]) if flags[v] else pixels[v, frame]
+                                 for v in range(len(cameras))])
+            weighted = np.array([_swap_sides(weights[v, frame, :, None])[:, 0] if flags[v] else weights[v, frame]
+                                 for v in range(len(cameras))])
+            alone = triangulate(cameras, labelled[:, sides], weighted[:, sides], outlier_m=np.inf)
+            expected = float(np.nansum(np.minimum(alone.reprojection_m, cap))
+                             + cap * np.isnan(alone.points[:, 0]).sum())
+            assert batched[frame, index] == expected, (frame, flags)

@@ -156,11 +156,35 @@ def triangulate(cameras: Sequence[PinholeCamera], pixels: np.ndarray, weights: n
         used[worst[drop], np.flatnonzero(drop)] = False
 
 
-def _side_errors(cameras, landmarks: np.ndarray, weights: np.ndarray, cap_m: float) -> float:
-    """Sum over the left and right landmarks of their capped reprojection errors [m]."""
+def _labelling_errors(cameras: Sequence[PinholeCamera], landmarks: np.ndarray, weights: np.ndarray,
+                      labellings: Sequence[tuple[bool, ...]], cap_m: float) -> np.ndarray:
+    """(F, L) per frame and labelling (per view, whether its left and right are exchanged) the sum
+    over the left and right landmarks of their capped reprojection errors [m], from landmarks
+    (V, F, 33, 2) weighted (V, F, 33). Every frame and labelling in one triangulation (the DLT and
+    the reprojection are per point, the rays undistorted once per view and side): each sum is the
+    one a triangulation of that frame alone gives, to the bit."""
+    views, frames = landmarks.shape[:2]
     sides = _LEFT + _RIGHT
-    result = triangulate(cameras, landmarks[:, sides], weights[:, sides], outlier_m=np.inf)
-    return float(np.nansum(np.minimum(result.reprojection_m, cap_m)) + cap_m * np.isnan(result.points[:, 0]).sum())
+    both = np.stack([landmarks[:, :, sides], _swap_sides(landmarks)[:, :, sides]], axis=1)  # (V, 2, F, S, 2)
+    both_weights = np.stack([weights[:, :, sides], _swap_sides(weights[..., None])[:, :, sides, 0]], axis=1)
+    normalised, extrinsics = _projection_rows(cameras, both.reshape(views, -1, 2))
+    normalised = normalised.reshape(both.shape)
+    chosen = np.array(labellings, dtype=np.int64).T  # (V, L): 1 where the view's sides are exchanged
+    picked = np.arange(views)[:, None]
+    count = len(labellings) * frames * len(sides)
+    rays = normalised[picked, chosen].reshape(views, count, 2)
+    pixels = both[picked, chosen].reshape(views, count, 2)
+    rows_weights = both_weights[picked, chosen].reshape(views, count)
+    points = _dlt(rays, extrinsics, rows_weights)
+    errors = _reprojection_m(cameras, points, pixels).reshape(views, len(labellings), frames, len(sides))
+    missing = np.isnan(points[:, 0]).reshape(len(labellings), frames, len(sides)).sum(axis=2)
+    totals = np.empty((frames, len(labellings)))
+    for labelling in range(len(labellings)):
+        for frame in range(frames):  # each (V, S) summed as one frame's own array would be
+            view_errors = np.ascontiguousarray(errors[:, labelling, frame])
+            totals[frame, labelling] = float(np.nansum(np.minimum(view_errors, cap_m))
+                                             + cap_m * missing[labelling, frame])
+    return totals
 
 
 def _face_says_swapped(points: np.ndarray) -> bool:
@@ -216,16 +240,14 @@ def triangulate_landmarks(cameras: Sequence[PinholeCamera], landmarks: np.ndarra
     swapped = np.zeros((frames, views), bool)
     used_share = np.zeros((frames, views))
     median_error = np.full(frames, np.nan)
+    labellings = [(False, *flips) for flips in itertools.product((False, True), repeat=views - 1)]
+    best_labelling = np.argmin(_labelling_errors(cameras, landmarks, weights, labellings, side_error_cap_m), axis=1)
     for frame in range(frames):
-        candidates = []
-        for flips in itertools.product((False, True), repeat=views - 1):
-            flags = (False, *flips)
-            labelled = np.array([_swap_sides(landmarks[v, frame]) if flags[v] else landmarks[v, frame]
-                                 for v in range(views)])
-            weighted = np.array([_swap_sides(weights[v, frame, :, None])[:, 0] if flags[v] else weights[v, frame]
-                                 for v in range(views)])
-            candidates.append((_side_errors(cameras, labelled, weighted, side_error_cap_m), flags, labelled, weighted))
-        _, flags, labelled, weighted = min(candidates, key=lambda candidate: candidate[0])
+        flags = labellings[best_labelling[frame]]
+        labelled = np.array([_swap_sides(landmarks[v, frame]) if flags[v] else landmarks[v, frame]
+                             for v in range(views)])
+        weighted = np.array([_swap_sides(weights[v, frame, :, None])[:, 0] if flags[v] else weights[v, frame]
+                             for v in range(views)])
         result = triangulate(cameras, labelled, weighted, outlier_m)
         frame_points = result.points
         # Two views left that still miss each other: no point rather than a wrong one (a limb the
