@@ -48,10 +48,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ibik_pin.app.video_people import detect_people_in_videos, usable_cores
+from ibik_pin.app.video_people import detect_people_in_videos
 from ibik_pin.evaluation import ESTIMATED
 from ibik_pin.io.calibration import POSE2SIM_TRC_TO_WORLD, read_calibration
 from ibik_pin.io.trc import read_trc
+from ibik_pin.readahead.view_workers import usable_cores
 from ibik_pin.vision.camera import cameras_in_frame
 from ibik_pin.vision.people import DetectionSettings
 from ibik_pin.vision.person_views import person_pose

@@ -497,3 +497,30 @@ def test_a_frame_the_parent_claimed_fails_at_its_own_frame(rig):
     assert got == list(range(failing))
     assert failed_in.value == parent  # claimed: read here, long before its frame
     assert not _children()
+
+
+def test_views_built_side_by_side_are_those_built_one_at_a_time_here_and_in_a_forked_child(rig):
+    """frame_images(workers=2) (readahead.view_workers): every frame's views, windows and axes as
+    with one worker, the empty view reported alike; the pool made here before the read-ahead forks
+    its child, which then makes its own (threads do not survive a fork)."""
+    from ibik_pin.readahead.view_workers import map_views
+
+    cameras, masks = rig
+    assert map_views(lambda item: (item, os.getpid()), [3, 1, 2], 2) == [(3, os.getpid()), (1, os.getpid()),
+                                                                       (2, os.getpid())]
+    source = Source(masks)
+
+    def side_by_side(frame):
+        return frame_images(source, cameras, [4.0, 4.0], [6.0, 6.0], frame, workers=2)
+
+    with FrameImagesAhead(side_by_side, FRAMES, "process", source) as images:
+        for frame in range(FRAMES):
+            ahead, here, alone = images.get(frame), side_by_side(frame), prepare(Source(masks), cameras, frame)
+            for built in (ahead, here):
+                assert built.disabled == alone.disabled == (["side"] if frame == 2 else [])
+                for view, reference in zip(built.views, alone.views, strict=True):
+                    assert view.camera is reference.camera and view.support.enabled == reference.support.enabled
+                    np.testing.assert_array_equal(view.support.values, reference.support.values)
+                for axis, reference in zip(built.axis_views, alone.axis_views, strict=True):
+                    np.testing.assert_array_equal(axis.pixels, reference.pixels)
+    assert not _children()

@@ -23,6 +23,7 @@ import numpy as np
 from ibik_pin.exceptions import IbikWarning
 from ibik_pin.model import BodyModel
 from ibik_pin.readahead.frame_images import frame_images
+from ibik_pin.readahead.view_workers import usable_cores
 from ibik_pin.subject.scaling import keypoint_lengths
 from ibik_pin.subject.split_cue import refine_split
 from ibik_pin.subject.trial_lengths import TrialLengths, refine_from_images, refine_from_reach
@@ -75,7 +76,7 @@ def refine_lengths_on_images(body: BodyModel, names: list[str], targets_m: np.nd
 
     def frames() -> Iterator:
         for frame in sampled:
-            images = frame_images(masks_of_frame, cameras, caps, scales, frame)
+            images = frame_images(masks_of_frame, cameras, caps, scales, frame, workers=usable_cores())
             image_task.set_views(images.views)
             axis_task.set_views(images.axis_views or [])
             yield pose(frame), [(image_task, 1.0), (axis_task, settings.axis_weight)]
@@ -86,7 +87,7 @@ def refine_lengths_on_images(body: BodyModel, names: list[str], targets_m: np.nd
         warnings.simplefilter("ignore", IbikWarning)
         legs = refine_from_images(body, lengths, frames(), limbs=LEGS, keep_ratio=True)
         legs = refine_split(body, legs, [pose(frame) for frame in sampled],
-                            lambda index: masks_of_frame(sampled[index]), cameras, centre)
+                            lambda index: masks_of_frame(sampled[index]), cameras, centre, workers=usable_cores())
     arms = refine_from_reach(lengths, names, targets_m, limbs=ARMS)
     refined = dict(lengths)
     for limb_lengths in (legs, arms):

@@ -25,6 +25,7 @@ from tqdm import tqdm
 
 from ibik_pin.app.people_worker import detect_one, read_message
 from ibik_pin.exceptions import IbikError, InputError, UnreconciledViewsError
+from ibik_pin.readahead.view_workers import usable_cores
 from ibik_pin.vision.people import DetectionSettings, ViewPeople
 from ibik_pin.vision.person_association import PeopleTracks, associate_people
 
@@ -123,14 +124,6 @@ def chosen_person(person: str | int, tracks: PeopleTracks) -> int:
         raise InputError(f"--person: expected auto, all or 1 to {tracks.count} (the people the views agree on), "
                          f"found {person!r}")
     return person - 1
-
-
-def usable_cores() -> int:
-    """The cores this process may run on."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover - not on Linux
-        return os.cpu_count() or 1
 
 
 def _start_worker(jobs: list[tuple[int, Path]], settings: DetectionSettings,

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ibik_pin.exceptions import InputError
+from ibik_pin.readahead.view_workers import map_views
 from ibik_pin.tasks import View
 from ibik_pin.tasks.silhouette_axis import AxisView
 from ibik_pin.vision.camera import CameraLike
@@ -35,7 +36,7 @@ class FrameImages:
 
 def frame_images(source: Callable[[int], Sequence[np.ndarray]], cameras: Sequence[CameraLike],
                  caps: Sequence[float | None], axis_scales: Sequence[float] | None, frame: int,
-                 target_boxes: np.ndarray | None = None) -> FrameImages:
+                 target_boxes: np.ndarray | None = None, workers: int = 1) -> FrameImages:
     """Frame `frame`'s views from its silhouettes: per camera, the overlap criterion's support (its
     inside cap from `caps` [px], None for none) and, when `axis_scales` is given, the medial axis of the
     silhouette-axis term (its robust scale [px]); both read one distance transform of the silhouette.
@@ -44,22 +45,23 @@ def frame_images(source: Callable[[int], Sequence[np.ndarray]], cameras: Sequenc
 
     An empty silhouette gives a disabled view and an empty axis, reported in `disabled` rather than
     warned of (catch_warnings, which would silence support_from_mask's warning, is not thread-safe).
+    `workers`: threads building the views side by side (readahead.view_workers; 1 where this runs
+    beside the solver in its process).
     """
     masks = source(frame)
     if len(masks) != len(cameras):
         raise InputError(f"expected one silhouette per camera ({len(cameras)}), got {len(masks)}")
-    views, axes, disabled = [], [], []
-    for index, (camera, mask) in enumerate(zip(cameras, masks, strict=True)):
+
+    def view(index: int) -> tuple[View, np.ndarray, bool]:
+        camera, mask = cameras[index], masks[index]
         # Each whole-image numpy call here would be a point where this thread, working beside the
         # solver, gives up the GIL and takes it back, and each such handover stalls the solver:
         # measured, 30 handovers a frame slowed its steps by a third. So the silhouette is read in
         # a few compiled calls: one scan, one inside and one outside distance transform.
         scanned = scan_mask(mask)
         if scanned.box is None:
-            disabled.append(camera.name)
-            views.append(View(camera, SupportImage(np.zeros(scanned.mask.shape, np.float32), enabled=False)))
-            axes.append(np.zeros((0, 2)))
-            continue
+            return View(camera, SupportImage(np.zeros(scanned.mask.shape, np.float32), enabled=False)), \
+                np.zeros((0, 2)), True
         # Without a medial axis only the support reads the inside distance: up to its cap, if it has one.
         cap = caps[index]
         limit = None if axis_scales is not None or cap is None else cap + 0.5
@@ -68,10 +70,14 @@ def frame_images(source: Callable[[int], Sequence[np.ndarray]], cameras: Sequenc
         if target_boxes is not None:
             top, bottom, left, right = (int(value) for value in target_boxes[frame, index])
             around = (slice(top, bottom), slice(left, right))
-        views.append(View(camera, support_from_mask(scanned, inside_cap_px=cap, inside=inside,
-                                                    also_around=around)))
-        if axis_scales is not None:
-            axes.append(medial_axis_pixels(scanned.mask, inside=inside))
+        support = View(camera, support_from_mask(scanned, inside_cap_px=cap, inside=inside, also_around=around))
+        axis = medial_axis_pixels(scanned.mask, inside=inside) if axis_scales is not None else np.zeros((0, 2))
+        return support, axis, False
+
+    built = map_views(view, range(len(cameras)), workers)
+    views = [support for support, _, _ in built]
+    axes = [axis for _, axis, _ in built]
+    disabled = [camera.name for camera, (_, _, empty) in zip(cameras, built, strict=True) if empty]
     axis_views = (None if axis_scales is None else
                   [AxisView(camera, pixels, scale) for camera, pixels, scale in zip(cameras, axes, axis_scales,
                                                                                      strict=True)])

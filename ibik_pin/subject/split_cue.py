@@ -29,6 +29,7 @@ import numpy as np
 
 from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
+from ibik_pin.readahead.view_workers import map_views
 from ibik_pin.subject.trial_lengths import LIMBS, TrialLengths, refine_from_images
 from ibik_pin.vision.camera import CameraLike
 from ibik_pin.vision.medial_axis import axis_distance_image
@@ -169,9 +170,16 @@ CLEARANCE_M = 0.15
 FLAT_BEYOND = 7.0
 
 
+def _centre_line_image(view: tuple[np.ndarray, float]) -> np.ndarray:
+    """A view's axis_distance_image from its silhouette and robust scale [px], as far out as the cue reads."""
+    mask, scale = view
+    return axis_distance_image(mask, within_px=FLAT_BEYOND * scale)
+
+
 def refine_split(body: BodyModel, legs: TrialLengths, poses: Sequence[Mapping[str, np.ndarray]],
                  masks_of_pose: Callable[[int], Sequence[np.ndarray]], cameras: Sequence[CameraLike],
-                 subject_position: np.ndarray, limbs: Sequence[str] = ("left_leg", "right_leg")) -> TrialLengths:
+                 subject_position: np.ndarray, limbs: Sequence[str] = ("left_leg", "right_leg"),
+                 workers: int = 1) -> TrialLengths:
     """Each limb's split between its segments chosen on the views' centre lines, its sum kept.
 
     Args:
@@ -182,6 +190,8 @@ def refine_split(body: BodyModel, legs: TrialLengths, poses: Sequence[Mapping[st
         poses: per frame refine_from_images read, keypoint name -> position (3,) [m].
         masks_of_pose: index into `poses` -> one silhouette per camera.
         subject_position: (3,) [m] where the scales in pixels are taken.
+        workers: threads building a frame's views' centre-line images side by side
+            (readahead.view_workers: the same images).
 
     Returns:
         The lengths with the split chosen; per limb the evidence of `legs` with "split" added.
@@ -194,9 +204,8 @@ def refine_split(body: BodyModel, legs: TrialLengths, poses: Sequence[Mapping[st
 
     def frames() -> Iterator:
         for index, pose in enumerate(poses):
-            cue.set_views(cameras, [axis_distance_image(mask, within_px=FLAT_BEYOND * scale)
-                                    for mask, scale in zip(masks_of_pose(index), robust, strict=True)],
-                          robust, clearance)
+            views = list(zip(masks_of_pose(index), robust, strict=True))
+            cue.set_views(cameras, map_views(_centre_line_image, views, workers), robust, clearance)
             placed = dict(pose)
             placed.update({LIMBS[name].middle: legs.middles[name][index] for name in chosen})
             yield placed, [(cue, 1.0)]

@@ -1,0 +1,42 @@
+"""Threads that build one frame's views side by side, in a process that has the cores to itself.
+
+A view's support image and medial axis come from its own silhouette alone, in compiled kernels and
+OpenCV calls that release the GIL, so a frame's views can be built at once on several cores: in the
+read-ahead's child process (which has the GIL to itself; beside the solver, in a thread, every
+handover of the GIL would stall the solve) and in the subject calibration's passes over sampled
+frames. Each view is built exactly as one at a time would build it; only the wall time changes.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
+
+__all__ = ["map_views", "usable_cores"]
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+# One pool per process: a pool's threads do not survive a fork, so a child makes its own.
+_pool: tuple[int, int, ThreadPoolExecutor] | None = None
+
+
+def usable_cores() -> int:
+    """The cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not on Linux
+        return os.cpu_count() or 1
+
+
+def map_views(build: Callable[[T], R], items: Sequence[T], workers: int) -> list[R]:
+    """[build(item) for item in items], in order, on up to `workers` threads (1: in this thread)."""
+    global _pool
+    workers = max(1, min(int(workers), len(items)))
+    if workers == 1:
+        return [build(item) for item in items]
+    if _pool is None or _pool[0] != os.getpid() or _pool[1] < workers:
+        _pool = (os.getpid(), workers, ThreadPoolExecutor(max_workers=workers, thread_name_prefix="ibik-views"))
+    return list(_pool[2].map(build, items))
