@@ -53,6 +53,7 @@ from ibik_pin.tracking.tracker import Tracker
 
 VARIANTS = {"every_target_step": {"target_step_tolerance": None}, "tol01": {"target_step_tolerance": 0.01},
             "tol02": {"target_step_tolerance": 0.02}, "tol05": {"target_step_tolerance": 0.05}, "defaults": {},
+            "image_step_0.1": {"image_step": 0.1},
             **{f"cadence{k}": {"swivel_cadence": k} for k in (1, 2, 3, 4)}}
 PARTS = ("target steps", "swivel search", "image steps", "closing step", "first frame")
 

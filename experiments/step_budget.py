@@ -13,7 +13,8 @@ Variants (VARIANTS):
 - iterations_5/6/8: at most that many image steps a frame;
 - image_step_0.075/0.1: a larger largest image step; image_step_0.1_iterations_6/8: both;
 - posture_previous: the posture prior toward the previous frame's solution, not the neutral pose;
-- posture_gain_0.1: the neutral posture prior corrects a tenth of its error a step (the default 1).
+- posture_gain_0.1/0.3/0.5: the neutral posture prior corrects that share of its error a step
+  (the default 1).
 
 A frame first takes up to 5 targets-only steps, whose lowest level is the posture prior (neutral,
 gain 1, weight 1e-2: with the damping 3e-2 it takes 92 % of its error a step in whatever the targets
@@ -66,6 +67,8 @@ VARIANTS = {
     "image_step_0.1_iterations_8": lambda: {"image_step": 0.1, "iterations": 8},
     "posture_previous": lambda: {"stack": posture_stack(reference="previous")},
     "posture_gain_0.1": lambda: {"stack": posture_stack(gain=0.1)},
+    "posture_gain_0.3": lambda: {"stack": posture_stack(gain=0.3)},
+    "posture_gain_0.5": lambda: {"stack": posture_stack(gain=0.5)},
 }
 
 
@@ -136,7 +139,7 @@ def main(argv: list[str] | None = None) -> dict:
                         help=f"comma-separated, the first the reference (default all: {', '.join(VARIANTS)})")
     parser.add_argument("--out", type=Path, default=None, help="where step_budget.json and .md go")
     parser.add_argument("--merge", type=Path, nargs="+", default=None, metavar="JSON",
-                        help="summarize the rows of these step_budget.json files (runs of other conditions) instead")
+                        help="summarize these step_budget.json files (other conditions or variants) instead")
     arguments = parser.parse_args(argv)
     names = arguments.variants.split(",")
     unknown = [name for name in names if name not in VARIANTS]
@@ -144,9 +147,15 @@ def main(argv: list[str] | None = None) -> dict:
         parser.error(f"unknown variant(s) {', '.join(unknown)}; known: {', '.join(VARIANTS)}")
     started = time.perf_counter()
     rows = []
-    if arguments.merge:
-        rows = sorted((row for path in arguments.merge for row in json.loads(path.read_text())["rows"]),
-                      key=lambda row: row["index"])
+    if arguments.merge:  # rows of one condition from several files (other variants) are joined
+        joined: dict[int, dict] = {}
+        for path in arguments.merge:
+            for row in json.loads(path.read_text())["rows"]:
+                joined.setdefault(row["index"], {}).update(row)
+        rows = [joined[index] for index in sorted(joined)]
+        missing = sorted({name for row in rows for name in names if name not in row})
+        if missing:
+            parser.error(f"--merge: no rows of {', '.join(missing)} for some conditions")
     for index in ([] if arguments.merge else range(arguments.first, arguments.first + arguments.conditions)):
         condition = draw_condition(index, arguments.seed)
         folder = arguments.keep / f"condition_{index:03d}"
