@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 from lengths_against_truth import pik_estimate
 from realdata.runner import DEFAULT_DATA, tracking_settings, variant
-from sweepkit.conditions import ConditionInputs, draw_condition, load_condition, write_condition
+from sweepkit.conditions import ConditionInputs, add_kept_arguments, kept_conditions
 from sweepkit.lengths import image_static, static_lengths, write_static
 from sweepkit.runs import run_condition_variant
 
@@ -143,26 +143,16 @@ def markdown(summary: dict, header: str) -> str:
 
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--keep", type=Path, required=True, help="the conditions' inputs (sweep.py --keep)")
-    parser.add_argument("--data", type=Path, default=DEFAULT_DATA)
-    parser.add_argument("--first", type=int, default=0)
-    parser.add_argument("--conditions", type=int, default=42)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--views", type=int, default=2)
-    parser.add_argument("--frames", type=int, default=40)
+    add_kept_arguments(parser, DEFAULT_DATA)
     parser.add_argument("--out", type=Path, default=None, help="where error_sources.json and .md go")
     arguments = parser.parse_args(argv)
     started = time.perf_counter()
     rows = []
-    for index in range(arguments.first, arguments.first + arguments.conditions):
-        condition = draw_condition(index, arguments.seed)
-        folder = arguments.keep / f"condition_{index:03d}"
-        inputs = load_condition(condition, folder, ("clean",))
-        if inputs is None or inputs.truth.shape[0] != arguments.frames:
-            inputs = write_condition(condition, arguments.data, arguments.frames, 30.0, folder, ("clean",))
+    for inputs in kept_conditions(arguments):
         row = condition_row(inputs, arguments.views)
         rows.append(row)
-        print(f"{index:3d} {condition.motion[:14]:14s} " + "  ".join(
+        condition = inputs.condition
+        print(f"{condition.index:3d} {condition.motion[:14]:14s} " + "  ".join(
             f"{name[:12]} {row[name]['elbows']:5.1f}/{row[name]['knees']:5.1f}" for name in VARIANTS), flush=True)
     summary = summarize(rows)
     command = " ".join(argv or sys.argv[1:])

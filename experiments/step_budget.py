@@ -35,7 +35,7 @@ import numpy as np
 import tomllib
 from error_sources import chosen_static
 from realdata.runner import DEFAULT_DATA
-from sweepkit.conditions import draw_condition, load_condition, write_condition
+from sweepkit.conditions import add_kept_arguments, kept_conditions
 from sweepkit.runs import run_condition_variant
 
 from ibik_pin.solvers.hqp import HierarchicalQPSolver
@@ -128,13 +128,7 @@ def markdown(summary: dict, header: str) -> str:
 
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--keep", type=Path, required=True, help="the conditions' inputs (sweep.py --keep)")
-    parser.add_argument("--data", type=Path, default=DEFAULT_DATA)
-    parser.add_argument("--first", type=int, default=0)
-    parser.add_argument("--conditions", type=int, default=42)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--views", type=int, default=2)
-    parser.add_argument("--frames", type=int, default=40)
+    add_kept_arguments(parser, DEFAULT_DATA)
     parser.add_argument("--variants", default=",".join(VARIANTS),
                         help=f"comma-separated, the first the reference (default all: {', '.join(VARIANTS)})")
     parser.add_argument("--out", type=Path, default=None, help="where step_budget.json and .md go")
@@ -156,12 +150,8 @@ def main(argv: list[str] | None = None) -> dict:
         missing = sorted({name for row in rows for name in names if name not in row})
         if missing:
             parser.error(f"--merge: no rows of {', '.join(missing)} for some conditions")
-    for index in ([] if arguments.merge else range(arguments.first, arguments.first + arguments.conditions)):
-        condition = draw_condition(index, arguments.seed)
-        folder = arguments.keep / f"condition_{index:03d}"
-        inputs = load_condition(condition, folder, ("clean",))
-        if inputs is None or inputs.truth.shape[0] != arguments.frames:
-            inputs = write_condition(condition, arguments.data, arguments.frames, 30.0, folder, ("clean",))
+    for inputs in ([] if arguments.merge else kept_conditions(arguments)):
+        index, condition = inputs.condition.index, inputs.condition
         static = chosen_static(inputs, arguments.views)
         row: dict = {"index": index, "motion": condition.motion}
         for name in names:

@@ -23,8 +23,10 @@ subject's height in each image against the 640 x 480, 4-m HumanEva camera's (306
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import json
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -256,3 +258,27 @@ def load_condition(condition: Condition, folder: Path,
     return ConditionInputs(folder, MOTIONS[condition.motion], [f"cam{k}" for k in range(1, len(placed.cameras) + 1)],
                            [str(n) for n in truth["names"]], truth["keypoints"], [str(n) for n in truth["targets"]],
                            placed, float(truth["rate"]))
+
+
+def add_kept_arguments(parser: argparse.ArgumentParser, default_data: Path) -> None:
+    """The options of an experiment that reruns the sweep's conditions kept by `sweep.py --keep`:
+    --keep, --data, --first, --conditions, --seed, --views, --frames (kept_conditions reads them)."""
+    parser.add_argument("--keep", type=Path, required=True, help="the conditions' inputs (sweep.py --keep)")
+    parser.add_argument("--data", type=Path, default=default_data)
+    parser.add_argument("--first", type=int, default=0)
+    parser.add_argument("--conditions", type=int, default=42)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--views", type=int, default=2)
+    parser.add_argument("--frames", type=int, default=40)
+
+
+def kept_conditions(arguments: argparse.Namespace) -> Iterator[ConditionInputs]:
+    """Each condition add_kept_arguments names, with clean silhouettes: read from --keep, or written
+    there (at 30 Hz, as the sweep) when absent or of another length."""
+    for index in range(arguments.first, arguments.first + arguments.conditions):
+        condition = draw_condition(index, arguments.seed)
+        folder = arguments.keep / f"condition_{index:03d}"
+        inputs = load_condition(condition, folder, ("clean",))
+        if inputs is None or inputs.truth.shape[0] != arguments.frames:
+            inputs = write_condition(condition, arguments.data, arguments.frames, 30.0, folder, ("clean",))
+        yield inputs
