@@ -524,3 +524,13 @@ def test_views_built_side_by_side_are_those_built_one_at_a_time_here_and_in_a_fo
                 for axis, reference in zip(built.axis_views, alone.axis_views, strict=True):
                     np.testing.assert_array_equal(axis.pixels, reference.pixels)
     assert not _children()
+
+
+def test_the_read_ahead_builds_large_views_on_threads_and_small_ones_in_turn():
+    from ibik_pin.readahead.view_workers import LARGE_VIEW_PIXELS, read_ahead_workers, usable_cores
+
+    assert read_ahead_workers([(640, 480)] * 4) == 1  # ready before the solve needs them
+    assert read_ahead_workers([(1088, 1920)] * 4) == usable_cores()
+    assert read_ahead_workers([(1088, 1920), (640, 480)]) == 1
+    assert read_ahead_workers([]) == 1
+    assert 640 * 480 < LARGE_VIEW_PIXELS <= 1280 * 800

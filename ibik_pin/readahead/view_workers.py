@@ -14,7 +14,14 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import TypeVar
 
-__all__ = ["map_views", "usable_cores"]
+__all__ = ["LARGE_VIEW_PIXELS", "map_views", "read_ahead_workers", "usable_cores"]
+
+#: A view of at least this many pixels is built on threads in the read-ahead's child. Its images
+#: then take longer than a frame's solve (four 1088 x 1920 views: 58-73 ms on one thread, the solve
+#: 15-17 ms), so the parent waits for the child. Smaller ones are ready before the solve needs them,
+#: and more threads would only take the solver's core: on real motion at 640 x 480 the solves went
+#: 142 -> 125 frames/s (2 views) and 146 -> 127 (4 views) with them, the frame loop no faster.
+LARGE_VIEW_PIXELS = 1_000_000
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -40,3 +47,10 @@ def map_views(build: Callable[[T], R], items: Sequence[T], workers: int) -> list
     if _pool is None or _pool[0] != os.getpid() or _pool[1] < workers:
         _pool = (os.getpid(), workers, ThreadPoolExecutor(max_workers=workers, thread_name_prefix="ibik-views"))
     return list(_pool[2].map(build, items))
+
+
+def read_ahead_workers(sizes: Sequence[tuple[int, int]]) -> int:
+    """Threads for the read-ahead's child to build a frame's views of (width, height) `sizes` [px]:
+    the usable cores when every view is large (LARGE_VIEW_PIXELS), else 1."""
+    large = bool(sizes) and all(width * height >= LARGE_VIEW_PIXELS for width, height in sizes)
+    return usable_cores() if large else 1

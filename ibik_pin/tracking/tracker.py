@@ -30,7 +30,7 @@ from ibik_pin.names import unknown_names_message
 from ibik_pin.readahead.frame_images import FrameImages, frame_images
 from ibik_pin.readahead.frames_ahead import READ_AHEAD_MODES, FrameImagesAhead
 from ibik_pin.readahead.image_process import FrameRecords, can_fork
-from ibik_pin.readahead.view_workers import usable_cores
+from ibik_pin.readahead.view_workers import read_ahead_workers
 from ibik_pin.solvers import SolveResult, make_solver
 from ibik_pin.tasks import FramePositionTask, ImageTask, PostureTask
 from ibik_pin.tasks.base import GradientTask
@@ -264,8 +264,10 @@ class Tracker:
         prepare = None if source is None else functools.partial(
             frame_images, source, self.cameras, caps, axis_scales if self.settings.criterion == "two-way" else None,
             target_boxes=target_boxes(self.cameras, targets),
-            # The child process has its cores to itself; a thread beside the solver builds one view at a time.
-            workers=usable_cores() if self.settings.read_ahead == "process" and can_fork() else 1)
+            # Large views on threads in the child process (it has its own GIL); beside the solver, in a
+            # thread, one view at a time.
+            workers=(read_ahead_workers([camera.size for camera in self.cameras])
+                     if self.settings.read_ahead == "process" and can_fork() else 1))
         loop_started = time.perf_counter()
         records = silhouettes if isinstance(silhouettes, FrameRecords) else None
         outcomes_job = functools.partial(self._outcomes_in_copy, plan, names, targets, report_index, configuration)
