@@ -242,13 +242,12 @@ def triangulate_landmarks(cameras: Sequence[PinholeCamera], landmarks: np.ndarra
     median_error = np.full(frames, np.nan)
     labellings = [(False, *flips) for flips in itertools.product((False, True), repeat=views - 1)]
     best_labelling = np.argmin(_labelling_errors(cameras, landmarks, weights, labellings, side_error_cap_m), axis=1)
+    chosen = np.array(labellings)[best_labelling]  # (F, V)
+    labelled_all = labelled_landmarks(landmarks, chosen)
+    weighted_all = labelled_landmarks(weights[..., None], chosen)[..., 0]
     for frame in range(frames):
         flags = labellings[best_labelling[frame]]
-        labelled = np.array([_swap_sides(landmarks[v, frame]) if flags[v] else landmarks[v, frame]
-                             for v in range(views)])
-        weighted = np.array([_swap_sides(weights[v, frame, :, None])[:, 0] if flags[v] else weights[v, frame]
-                             for v in range(views)])
-        result = triangulate(cameras, labelled, weighted, outlier_m)
+        result = triangulate(cameras, labelled_all[:, frame], weighted_all[:, frame], outlier_m)
         frame_points = result.points
         # Two views left that still miss each other: no point rather than a wrong one (a limb the
         # detector guessed in one view, another person's in the other).
