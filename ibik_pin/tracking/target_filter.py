@@ -5,7 +5,7 @@ human joints move smoothly: most of the power of joint positions in gait lies be
 (Winter, Biomechanics and Motor Control of Human Movement, ch. 2). The tracker meets its targets
 exactly at the top priority, so every millimetre of target noise goes into the joints.
 
-The filter is a Butterworth low-pass run forward and backward (scipy.signal.filtfilt: no lag; a
+The filter is a Butterworth low-pass run forward and backward (tracking.butterworth: no lag; a
 2nd-order design twice is a 4th-order response, the biomechanics convention and Pose2Sim's default
 filter's order). Its nominal cutoff is corrected for the two passes (Winter: the cutoff of the
 design is the wanted -3 dB frequency over (2^(1/passes) - 1)^(1/(2 order))), so that the reported
@@ -32,7 +32,7 @@ free walk's footfalls as noise and moved its toes by 16 mm rms.
 Missing values (NaN) stay missing. A gap shorter than MAX_BRIDGE_S is bridged by a straight line
 for the filter (a dropped frame then moves its neighbours by millimetres, where splitting the track
 there moved them by up to 31 mm at 15 Hz); longer gaps split the track into runs, each filtered on
-its own (padded by odd reflection, filtfilt's default, up to two periods of the cutoff); runs too
+its own (padded by odd reflection, scipy's filtfilt's default, up to two periods of the cutoff); runs too
 short to tell motion from noise are left as they are.
 
 A leap is not noise, nor motion: a frame where a keypoint lies farther from the median of the 5
@@ -49,15 +49,15 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.signal import butter, filtfilt
 
 from ibik_pin.exceptions import InputError
+from ibik_pin.tracking.butterworth import design_lowpass, zero_lag_lowpass
 
 __all__ = ["TARGET_FILTER_MODES", "KeypointFilter", "TargetFilterResult", "filter_targets", "lowpass",
            "leaps", "noise_band", "parse_target_filter", "residual_curve", "residual_cutoff"]
 
 TARGET_FILTER_MODES = ("off", "auto")
-ORDER = 2  # per pass; forward and backward make a 4th-order zero-lag response
+ORDER = 2  # per pass (tracking.butterworth's); forward and backward make a 4th-order zero-lag response
 PASSES = 2
 # The design's cutoff is the response's over this factor (Winter's correction for the passes).
 PASS_CORRECTION = (2.0 ** (1.0 / PASSES) - 1.0) ** (1.0 / (2 * ORDER))
@@ -113,15 +113,15 @@ def lowpass(signal: np.ndarray, rate_hz: float, cutoff_hz: float) -> np.ndarray:
     signal = np.asarray(signal, dtype=float)
     nyquist = 0.5 * rate_hz
     design = min(cutoff_hz / PASS_CORRECTION, 0.99 * nyquist)
-    b, a = butter(ORDER, design / nyquist)
+    b, a = design_lowpass(design / nyquist)
     valid = np.all(np.isfinite(signal), axis=1)
     bridged = _bridged(signal, _short_gaps(valid, int(MAX_BRIDGE_S * rate_hz)))
     out = bridged.copy()
     pad_frames = int(np.ceil(2.0 * rate_hz / cutoff_hz))
     for start, stop in _runs(np.all(np.isfinite(bridged), axis=1)):
         if stop - start >= MIN_RUN_FRAMES:
-            out[start:stop] = filtfilt(b, a, bridged[start:stop], axis=0,
-                                       padlen=min(stop - start - 1, max(3 * (ORDER + 1), pad_frames)))
+            out[start:stop] = zero_lag_lowpass(b, a, bridged[start:stop],
+                                               min(stop - start - 1, max(3 * (ORDER + 1), pad_frames)))
     out[~valid] = signal[~valid]
     return out
 
