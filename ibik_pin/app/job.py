@@ -17,7 +17,7 @@ from ibik_pin.app.axes import TRC_AXES
 from ibik_pin.app.options import as_options
 from ibik_pin.app.video_people import parse_person
 from ibik_pin.exceptions import InputError, UnknownNameError
-from ibik_pin.solvers import available_qp_solvers
+from ibik_pin.solvers import available_qp_solvers, qp_solver_available
 from ibik_pin.tracking.settings import TrackingSettings
 from ibik_pin.tracking.target_filter import parse_target_filter
 
@@ -38,7 +38,7 @@ def check_run_bounds(settings: TrackingSettings) -> None:
                                      ("--mask-filter", settings.mask_filter_radius, 0, MAX_MASK_FILTER_RADIUS)):
         if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
             raise InputError(f"{option}: expected a whole number from {low} to {high}, found {value!r}")
-    if settings.qp_solver not in available_qp_solvers():
+    if not qp_solver_available(settings.qp_solver):
         raise UnknownNameError(f"--qp-solver: expected one of {', '.join(available_qp_solvers())} (the ones "
                                f"installed here), found {settings.qp_solver!r}")
     tolerance = settings.step_tolerance

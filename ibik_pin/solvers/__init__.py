@@ -21,7 +21,7 @@ from ibik_pin.solvers.projection import (
     LiegeoisSolver,
     PriorityStackSolver,
 )
-from ibik_pin.solvers.qp_backends import LevelProblem, QPBackend, available_qp_solvers
+from ibik_pin.solvers.qp_backends import LevelProblem, QPBackend, available_qp_solvers, qp_solver_available
 from ibik_pin.solvers.status import LevelStatus
 from ibik_pin.solvers.step_adaptation import StepAdaptation
 
@@ -50,7 +50,7 @@ def make_solver(name: str, *, limits: JointLimits | None = None, damping: float 
     """
     if name not in SOLVERS:
         raise UnknownNameError(f"unknown solver {name!r}; available: {', '.join(SOLVERS)}")
-    if qp_solver not in available_qp_solvers():  # refused whatever the scheme, so no typo waits for "qp"
+    if not qp_solver_available(qp_solver):  # refused whatever the scheme, so no typo waits for "qp"
         raise UnknownNameError(f"unknown QP solver {qp_solver!r}; available: {', '.join(available_qp_solvers())}")
     if name == "qp":
         return HierarchicalQPSolver(limits=limits, damping=damping, qp_solver=qp_solver)
@@ -59,6 +59,6 @@ def make_solver(name: str, *, limits: JointLimits | None = None, damping: float 
 
 __all__ = [
     "Solver", "StepResult", "SolveResult", "LevelReport", "LevelStatus", "StepAdaptation", "SOLVERS", "make_solver",
-    "DEFAULT_DAMPING", "DEFAULT_QP_SOLVER", "LevelProblem", "QPBackend", "available_qp_solvers",
+    "DEFAULT_DAMPING", "DEFAULT_QP_SOLVER", "LevelProblem", "QPBackend", "available_qp_solvers", "qp_solver_available",
     "DampedLeastSquaresSolver", "LiegeoisSolver", "PriorityStackSolver", "HierarchicalQPSolver",
 ]

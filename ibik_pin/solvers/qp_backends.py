@@ -21,16 +21,19 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import proxsuite
-import qpsolvers
 
 from ibik_pin.exceptions import QPBackendError, UnknownNameError
 from ibik_pin.solvers.active_set import primal_active_set
 
+if TYPE_CHECKING:
+    import qpsolvers
+
 __all__ = ["LevelProblem", "QPBackend", "ActiveSetBackend", "ProxsuiteBackend", "QpsolversBackend",
-           "available_qp_solvers", "make_qp_backend", "UNBOUNDED", "FEASIBILITY"]
+           "available_qp_solvers", "make_qp_backend", "qp_solver_available", "UNBOUNDED", "FEASIBILITY"]
 
 UNBOUNDED = 1e20  # the stand-in for an infinite bound; rows bounded by it on a side are unbounded there
 # How far [rad, m] the active-set answer may leave a bound: a bound on a coordinate that the higher
@@ -68,6 +71,7 @@ class LevelProblem:
     def to_qpsolvers(self) -> qpsolvers.Problem:
         """The same QP as a `qpsolvers.Problem` (P = H, q = g, G w <= h), the two-sided rows split
         into G = [C; -C] and h = [upper; -lower], rows with an UNBOUNDED side left out."""
+        qpsolvers = _qpsolvers()
         has_upper = self.upper < UNBOUNDED
         has_lower = self.lower > -UNBOUNDED
         if not (has_upper.any() or has_lower.any()):
@@ -189,7 +193,7 @@ class QpsolversBackend(QPBackend):
 
     def solve(self, problem: LevelProblem) -> np.ndarray:
         try:
-            solution = qpsolvers.solve_problem(problem.to_qpsolvers(), solver=self.name, **self.options)
+            solution = _qpsolvers().solve_problem(problem.to_qpsolvers(), solver=self.name, **self.options)
         except Exception as error:  # qpsolvers' and its backends' own errors, re-raised as ours
             raise QPBackendError(self.name, f"{type(error).__name__}: {error}", problem.level) from error
         if not solution.found or solution.x is None or not np.all(np.isfinite(solution.x)):
@@ -200,10 +204,27 @@ class QpsolversBackend(QPBackend):
         return np.asarray(solution.x, dtype=float)
 
 
+#: The backends of the package itself; the others are qpsolvers'.
+BUILT_IN_QP_SOLVERS = ("active_set", "proxsuite")
+
+
+def _qpsolvers():
+    """qpsolvers, imported when a name or backend of its is needed: its import (scipy.sparse's with
+    it) took 0.2 s of every command's, which the built-in backends never use."""
+    import qpsolvers
+
+    return qpsolvers
+
+
 def available_qp_solvers() -> list[str]:
     """The backend names `make_qp_backend` accepts here: "active_set", "proxsuite", then qpsolvers'
     installed solvers."""
-    return ["active_set", "proxsuite", *sorted(qpsolvers.available_solvers)]
+    return [*BUILT_IN_QP_SOLVERS, *sorted(_qpsolvers().available_solvers)]
+
+
+def qp_solver_available(name: str) -> bool:
+    """Whether `make_qp_backend` accepts `name` here (qpsolvers is imported only for a name not built in)."""
+    return name in BUILT_IN_QP_SOLVERS or name in _qpsolvers().available_solvers
 
 
 def make_qp_backend(name: str, *, accuracy: float = 1e-11, max_iterations: int = 1000) -> QPBackend:
@@ -221,7 +242,7 @@ def make_qp_backend(name: str, *, accuracy: float = 1e-11, max_iterations: int =
         return ActiveSetBackend()
     if name == "proxsuite":
         return ProxsuiteBackend(accuracy, max_iterations)
-    if name in qpsolvers.available_solvers:
+    if name in _qpsolvers().available_solvers:
         options = {"eps_abs": accuracy, "eps_rel": 0.0, "max_iter": max_iterations} if name == "proxqp" else {}
         return QpsolversBackend(name, **options)
     raise UnknownNameError(f"unknown QP solver {name!r}; available: {', '.join(available_qp_solvers())}")
