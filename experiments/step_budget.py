@@ -14,7 +14,9 @@ Variants (VARIANTS):
 - image_step_0.075/0.1: a larger largest image step; image_step_0.1_iterations_6/8: both;
 - posture_previous: the posture prior toward the previous frame's solution, not the neutral pose;
 - posture_gain_0.1/0.3/0.5: the neutral posture prior corrects that share of its error a step
-  (the default 1).
+  (the default 1);
+- swivel_smoothing_off / swivel_cutoff_4: the free elbows' and knees' swivels not low-passed over
+  the trial after the frames are solved, or at 4 Hz (the default 6; tracking.swivel_smoothing).
 
 A frame first takes up to 5 targets-only steps, whose lowest level is the posture prior (neutral,
 gain 1, weight 1e-2: with the damping 3e-2 it takes 92 % of its error a step in whatever the targets
@@ -69,6 +71,8 @@ VARIANTS = {
     "posture_gain_0.1": lambda: {"stack": posture_stack(gain=0.1)},
     "posture_gain_0.3": lambda: {"stack": posture_stack(gain=0.3)},
     "posture_gain_0.5": lambda: {"stack": posture_stack(gain=0.5)},
+    "swivel_smoothing_off": lambda: {"swivel_cutoff_hz": None},
+    "swivel_cutoff_4": lambda: {"swivel_cutoff_hz": 4.0},
 }
 
 

@@ -87,6 +87,11 @@ def _add_track_arguments(parser: argparse.ArgumentParser) -> None:
                              "chooses each keypoint's cutoff from the trial's residual analysis, a number is the "
                              "cutoff in Hz; report.json's target_filter gives the cutoffs and the change "
                              "(default: auto; noise-free or already filtered keypoints are left nearly as they are)")
+    parser.add_argument("--swivel-cutoff", default="6", metavar="HZ|off",
+                        help="once every frame is solved, low-pass the free elbows' and knees' swivels about their "
+                             "limbs' ends over the trial at this cutoff in Hz, each joint kept on its circle (the "
+                             "frame-to-frame jitter of the image's peak); report.json's swivel_smoothing says how "
+                             "far they moved (default: 6, the band of human joint motion; off: each frame's own)")
     parser.add_argument("--method", choices=sorted(SOLVERS), default="qp",
                         help="solver scheme (default: qp, the hierarchical QP with joint limits)")
     parser.add_argument("--qp-solver", metavar="NAME",
@@ -145,6 +150,7 @@ def _job(arguments: argparse.Namespace) -> TrackJob:
     from ibik_pin.solvers import DEFAULT_QP_SOLVER
     from ibik_pin.tracking.settings import TrackingSettings
     from ibik_pin.tracking.stack import Stack
+    from ibik_pin.tracking.swivel_smoothing import parse_swivel_cutoff
 
     stack = Stack.from_toml(arguments.stack) if arguments.stack else None
     if arguments.qp_solver is not None and stack is not None and stack.qp_solver not in (None, arguments.qp_solver):
@@ -170,7 +176,7 @@ def _job(arguments: argparse.Namespace) -> TrackJob:
                                   use_image=not arguments.no_image, mask_filter_radius=arguments.mask_filter,
                                   criterion=arguments.criterion, swivel_search=arguments.swivel_search,
                                   image_moves=arguments.image_moves, read_ahead=arguments.read_ahead,
-                                  stack=stack),
+                                  swivel_cutoff_hz=parse_swivel_cutoff(arguments.swivel_cutoff), stack=stack),
         overlay=arguments.overlay,
         quiet=arguments.quiet,
         trc_axes=arguments.trc_axes,

@@ -94,4 +94,5 @@ def expand_to_frames(result: TrackingResult, body: BodyModel, solved: np.ndarray
                          else result.inside_fraction),
         camera_names=list(result.camera_names),
         iterations=listed(result.iterations, int),
+        swivel_smoothing=result.swivel_smoothing,
     )

@@ -226,6 +226,8 @@ class TrackingReport:
             None otherwise.
         target_filter: how --target-filter low-passed the targets, per keypoint the cutoff [Hz] and
             change [mm] (tracking.target_filter.TargetFilterResult.report); None if not reported.
+        swivel_smoothing: how the free elbows' and knees' swivels were low-passed over the trial
+            (tracking.swivel_smoothing; TrackingResult.swivel_smoothing); None when it did not run.
         diagnosis: what the run judged of its own evidence: suspect views and frames, the figures
             and thresholds (app.diagnosis.Diagnosis); None when not judged (the report of a run
             made outside `ibik track`).
@@ -276,6 +278,7 @@ class TrackingReport:
     extrinsics: ExtrinsicsRefit | None = None
     trial_lengths: dict[str, Any] | None = None
     target_filter: dict[str, Any] | None = None
+    swivel_smoothing: dict[str, Any] | None = None
     diagnosis: dict[str, Any] | None = None
     people: PeopleReport | None = None
     stage_seconds: dict[str, float] | None = None
@@ -352,6 +355,7 @@ class TrackingReport:
             step_tolerance=settings.step_tolerance,
             target_step_tolerance=settings.target_step_tolerance,
             image_stop=settings.image_stop,
+            swivel_smoothing=result.swivel_smoothing,
             frames_with_outlier_targets={} if outliers is None else by_frame(
                 [[name for name, out in zip(result.target_names, row, strict=True) if out] for row in outliers]),
         )

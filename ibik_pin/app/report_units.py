@@ -139,6 +139,16 @@ UNITS = {
                                 "kept as they were: farther from their 5-frame median than 10 m/s moves in a frame)"),
     "target_filter.unfiltered_because": ("null, or why auto left every target as it was (a frame rate too low to "
                                          "tell noise from motion above 6 Hz)"),
+    "swivel_smoothing": ("how the free elbows' and knees' swivels were low-passed over the trial once every frame "
+                         "was solved (--swivel-cutoff; each joint kept on its circle about its limb's ends): the "
+                         "swivel_smoothing.* entries; null when it did not run (no image, or off)"),
+    "swivel_smoothing.cutoff_hz": "Hz: the cutoff of the zero-lag low-pass",
+    "swivel_smoothing.frame_rate_hz": "Hz: the frames' rate it was designed at",
+    "swivel_smoothing.applied": "false when the cutoff lies above what the frame rate allows (swivel_smoothing.why)",
+    "swivel_smoothing.frames_moved": "frames in which at least one joint moved (farther than 0.5 mm from its place)",
+    "swivel_smoothing.joints": ("per free elbow and knee, moved_mm (how far it moved; median and max over the frames "
+                                "it was free) and off_smoothed_mm (how far it ended from its smoothed place: the "
+                                "targets and joint limits come first)"),
     "warnings": "every warning the run gave on stderr (IbikWarning), in order, each once",
     "kept_user_files": ("paths in OUTDIR that an earlier output held and ibik did not write (not in its manifest): "
                         "kept beside the new outputs; empty folders end with /"),

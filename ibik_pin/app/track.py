@@ -333,7 +333,8 @@ def _run_into(staging: Path, job: TrackJob, detected: DetectedPeople | None = No
     solve_started = time.perf_counter()
     with tqdm(total=len(solved), desc="tracking", unit="frame", disable=True if job.quiet else None) as bar:
         result = tracker.track([names[index] for index in tracked], targets_m[solved][:, tracked],
-                               source if use_image else None, progress=bar.update)
+                               source if use_image else None, progress=bar.update,
+                               frame_rate_hz=float(trc.data_rate))
     stages["solve"] = time.perf_counter() - solve_started
     if len(solved) < frame_count:
         result = expand_to_frames(result, body, solved, np.asarray(trc.times, dtype=float))

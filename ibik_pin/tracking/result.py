@@ -54,6 +54,9 @@ class TrackingResult:
             much of it the levels above sacrificed, at the frame's solution (tracking.outcomes).
         iterations: per frame, the steps of its main solve (fewer than the settings' with
             `step_tolerance`; the first frame's are its search's).
+        swivel_smoothing: what the swivel smoothing did (Tracker.track's `frame_rate_hz`): its
+            cutoff, the frames moved, per elbow and knee how far it moved and how far it ended from
+            its smoothed place [mm]; None when it did not run.
     """
 
     q: np.ndarray
@@ -76,6 +79,7 @@ class TrackingResult:
     inside_fraction: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     camera_names: list[str] = field(default_factory=list)
     iterations: list[int] = field(default_factory=list)
+    swivel_smoothing: dict | None = None
 
     @property
     def solve_frames_per_second(self) -> float:

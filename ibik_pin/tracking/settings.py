@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 from ibik_pin.solvers import DEFAULT_QP_SOLVER
 from ibik_pin.tracking.stack import Stack
+from ibik_pin.tracking.swivel_smoothing import SWIVEL_CUTOFF_HZ
 
 __all__ = ["IMAGE_MOVES", "IMAGE_STOPS", "TrackingSettings"]
 
@@ -82,6 +83,11 @@ class TrackingSettings:
         stack: the priority levels and their tasks (tracking.stack); None: Stack.default(). An
             image task's criterion, step and views, when the stack gives them, replace
             `criterion`, `image_step` and the cameras; a posture task's weight `posture_weight`.
+        swivel_cutoff_hz: with the frames' rate given to Tracker.track, the free elbows' and knees'
+            swivels are low-passed at this cutoff [Hz] once every frame is solved, each joint kept
+            on its frame's circle (tracking.swivel_smoothing); None: off. 6 Hz, the band of human
+            joint motion (Winter); on the sweep (42 conditions, 2 views) 4-8 Hz left no condition
+            worse by more than 1 mm (docs/sweep.md).
         read_ahead: where each frame's silhouettes are read and its support images built while
             the frame before is solved (readahead.frames_ahead): "process" (a forked child; a thread
             where fork is not available, off Linux), "thread", or "off" (in turn, on one thread:
@@ -111,4 +117,5 @@ class TrackingSettings:
     step_tolerance: float | None = None
     image_stop: str = "peak"
     stack: Stack | None = None
+    swivel_cutoff_hz: float | None = SWIVEL_CUTOFF_HZ
     read_ahead: str = "process"
