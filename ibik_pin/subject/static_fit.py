@@ -97,6 +97,21 @@ class StaticFit:
                              for k in range(len(names)) if joint in moved_by[k]]
                             for _, entries in self.groups]
 
+        # For frame_terms, on arrays: each keypoint's velocity columns (the joints carrying its frame),
+        # and the groups' moves as (keypoint, group, parent joint of the moved joint, direction) rows.
+        self._support = np.zeros((len(names), model.nv), dtype=bool)
+        for k, joint in enumerate(self.parent_joints):
+            for ancestor in model.supports[joint]:
+                if ancestor:
+                    self._support[k, model.idx_vs[ancestor]:model.idx_vs[ancestor] + model.nvs[ancestor]] = True
+        moves = [(k, g, int(model.parents[joint]), direction) for g, entries in enumerate(self.group_moves)
+                 for k, joint, direction in entries]
+        self._move_keypoints = np.array([move[0] for move in moves], dtype=int)
+        self._move_groups = np.array([move[1] for move in moves], dtype=int)
+        self._move_parents, self._move_parent_rows = np.unique(np.array([move[2] for move in moves], dtype=int),
+                                                               return_inverse=True)
+        self._move_directions = np.array([move[3] for move in moves], dtype=float).reshape(-1, 3)
+
         # Revolute coordinates: limits and posture weights (the free-flyer is left free).
         revolute = [joint for joint in range(1, model.njoints) if model.nqs[joint] == 1 and model.nvs[joint] == 1]
         self.revolute_q = np.array([model.idx_qs[joint] for joint in revolute], dtype=int)
@@ -165,6 +180,8 @@ class StaticFit:
     def set_model_vector(self, theta: np.ndarray) -> None:
         """Take theta (3K + G,) as the model unknowns and set the working model to them."""
         count = 3 * len(self.names)
+        if np.array_equal(theta, self.model_vector()):  # the model already holds it (the poses-only stage)
+            return
         self.offsets = theta[:count].reshape(-1, 3).copy()
         self.scales = theta[count:].copy()
         self._apply(self.offsets, self.scales)
@@ -192,24 +209,34 @@ class StaticFit:
         pin.computeJointJacobians(model, data, q)
         pin.updateFramePlacements(model, data)
         present = self.present[frame]
-        residual = np.array([data.oMf[i].translation for i in self.frame_ids]) - self.points[frame]
+        positions = np.array([data.oMf[i].translation for i in self.frame_ids])
+        residual = positions - self.points[frame]
         residual[~present] = 0.0
         weights = _robust_weights(np.linalg.norm(residual, axis=1), self.settings.robust_scale)
-        pose_jacobian = np.zeros((3 * key_count, model.nv))
-        observed = [int(k) for k in np.flatnonzero(present)]
-        for k in observed:
-            pose_jacobian[3 * k:3 * k + 3] = pin.getFrameJacobian(
-                model, data, self.frame_ids[k], pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)[:3]
+        # Each keypoint's velocity, world-aligned, from the joints' spatial Jacobian (data.J, world
+        # frame): v = v_origin + w x p over the columns of the joints that carry it (as
+        # getFrameJacobian's LOCAL_WORLD_ALIGNED rows, one call for every keypoint).
+        linear, angular = data.J[:3].T, data.J[3:].T  # (nv, 3) each
+        w, p = angular[None], positions[:, None]  # w x p by components (np.cross costs more than the rest)
+        columns = linear[None] + np.stack([w[..., 1] * p[..., 2] - w[..., 2] * p[..., 1],
+                                           w[..., 2] * p[..., 0] - w[..., 0] * p[..., 2],
+                                           w[..., 0] * p[..., 1] - w[..., 1] * p[..., 0]], axis=2)  # (K, nv, 3)
+        columns *= (self._support & present[:, None])[..., None]
+        pose_jacobian = columns.transpose(0, 2, 1).reshape(3 * key_count, model.nv)
         model_jacobian = None
         if with_model:
-            model_jacobian = np.zeros((3 * key_count, 3 * key_count + len(self.groups)))
-            for k in observed:
-                model_jacobian[3 * k:3 * k + 3, 3 * k:3 * k + 3] = data.oMi[self.parent_joints[k]].rotation
-            for g, moves in enumerate(self.group_moves):
-                for moved, joint, direction in moves:
-                    if present[moved]:
-                        model_jacobian[3 * moved:3 * moved + 3, 3 * key_count + g] += (
-                            data.oMi[model.parents[joint]].rotation @ direction)
+            observed = np.flatnonzero(present)
+            placements = np.zeros((key_count, 3, key_count, 3))
+            placements[observed, :, observed, :] = np.array([data.oMi[self.parent_joints[k]].rotation
+                                                             for k in observed]).reshape(-1, 3, 3)
+            groups = np.zeros((key_count, len(self.groups), 3))
+            if self._move_keypoints.size:
+                rotations = np.array([data.oMi[int(joint)].rotation for joint in self._move_parents])
+                moved = np.matmul(rotations[self._move_parent_rows], self._move_directions[..., None])[..., 0]
+                moved[~present[self._move_keypoints]] = 0.0
+                np.add.at(groups, (self._move_keypoints, self._move_groups), moved)
+            model_jacobian = np.concatenate([placements.reshape(3 * key_count, 3 * key_count),
+                                             groups.transpose(0, 2, 1).reshape(3 * key_count, -1)], axis=1)
         return residual.reshape(-1), weights, pose_jacobian, model_jacobian
 
     def cost(self, q: np.ndarray, theta: np.ndarray | None) -> float:
@@ -217,13 +244,10 @@ class StaticFit:
         (the current model unknowns if None), with the robust loss on the data term."""
         if theta is not None:
             self.set_model_vector(theta)
-        total = 0.0
-        for frame, configuration in enumerate(q):
-            pin.framesForwardKinematics(self.model, self.data, configuration)
-            distances = np.linalg.norm(np.array([self.data.oMf[i].translation for i in self.frame_ids])
-                                       - self.points[frame], axis=1)[self.present[frame]]
-            total += float(np.sum(_robust_loss(distances, self.settings.robust_scale)))
-            total += float(np.sum((self.posture_weights * configuration[self.revolute_q]) ** 2))
+        positions = np.array([self._positions(configuration) for configuration in q])  # (F, K, 3)
+        distances = np.linalg.norm(positions - self.points, axis=2)[self.present]
+        total = float(np.sum(_robust_loss(distances, self.settings.robust_scale)))
+        total += float(np.sum((self.posture_weights * q[:, self.revolute_q]) ** 2))
         prior, _ = self.model_prior(self.model_vector() if theta is None else theta)
         return total + float(prior @ prior)
 

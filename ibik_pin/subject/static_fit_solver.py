@@ -52,29 +52,34 @@ def _levenberg_marquardt(fit: StaticFit, fit_model: bool, iterations: int) -> No
     q = np.array([fit.clip(configuration) for configuration in fit.q])
     cost = fit.cost(q, theta)
     damping = 1e-3
+    posture = fit.posture_weights ** 2
     for _ in range(iterations):
         fit.set_model_vector(theta)
-        blocks = []
-        hessian_model = np.zeros((theta_count, theta_count))
-        gradient_model = np.zeros(theta_count)
-        for frame in range(frame_count):
-            residual, weights, pose_jacobian, model_jacobian = fit.frame_terms(frame, q[frame], fit_model)
-            row_weights = np.repeat(weights, 3)
-            weighted = pose_jacobian * row_weights[:, None]
-            hessian = weighted.T @ pose_jacobian
-            gradient = weighted.T @ residual
-            posture = fit.posture_weights ** 2
-            hessian[fit.revolute_v, fit.revolute_v] += posture
-            gradient[fit.revolute_v] += posture * q[frame][fit.revolute_q]
-            coupling = weighted.T @ model_jacobian if fit_model else np.zeros((nv, 0))
-            if fit_model:
-                hessian_model += (model_jacobian * row_weights[:, None]).T @ model_jacobian
-                gradient_model += (model_jacobian * row_weights[:, None]).T @ residual
-            at_lower = q[frame][fit.revolute_q] <= fit.lower + 1e-10
-            at_upper = q[frame][fit.revolute_q] >= fit.upper - 1e-10
-            pushed = fit.revolute_v[(at_lower & (gradient[fit.revolute_v] > 0.0))
-                                    | (at_upper & (gradient[fit.revolute_v] < 0.0))]
-            blocks.append((hessian, gradient, coupling, pushed))
+        terms = [fit.frame_terms(frame, q[frame], fit_model) for frame in range(frame_count)]
+        residual = np.array([term[0] for term in terms])  # (F, 3K)
+        row_weights = np.repeat(np.array([term[1] for term in terms]), 3, axis=1)  # (F, 3K)
+        pose_jacobian = np.array([term[2] for term in terms])  # (F, 3K, nv)
+        weighted = pose_jacobian * row_weights[..., None]
+        hessian = np.matmul(weighted.transpose(0, 2, 1), pose_jacobian)  # (F, nv, nv)
+        gradient = np.matmul(weighted.transpose(0, 2, 1), residual[..., None])[..., 0]
+        hessian[:, fit.revolute_v, fit.revolute_v] += posture
+        gradient[:, fit.revolute_v] += posture * q[:, fit.revolute_q]
+        if fit_model:
+            model_jacobian = np.array([term[3] for term in terms])  # (F, 3K, T)
+            coupling = np.matmul(weighted.transpose(0, 2, 1), model_jacobian)  # (F, nv, T)
+            weighted_model = (model_jacobian * row_weights[..., None]).reshape(-1, model_jacobian.shape[2])
+            hessian_model = weighted_model.T @ model_jacobian.reshape(weighted_model.shape)
+            gradient_model = weighted_model.T @ residual.reshape(-1)
+        else:
+            coupling = np.zeros((frame_count, nv, 0))
+            hessian_model, gradient_model = np.zeros((0, 0)), np.zeros(0)
+        # Coordinates at a limit that the gradient pushes outward are frozen for the step.
+        at_lower = q[:, fit.revolute_q] <= fit.lower + 1e-10
+        at_upper = q[:, fit.revolute_q] >= fit.upper - 1e-10
+        revolute_gradient = gradient[:, fit.revolute_v]
+        pushed = np.zeros((frame_count, nv), dtype=bool)
+        pushed[:, fit.revolute_v] = (at_lower & (revolute_gradient > 0.0)) | (at_upper & (revolute_gradient < 0.0))
+        blocks = (hessian, gradient, coupling, pushed)
         frozen_model = np.zeros(theta_count, dtype=bool)
         if fit_model:
             prior, prior_weights = fit.model_prior(theta)
@@ -109,36 +114,43 @@ def _levenberg_marquardt(fit: StaticFit, fit_model: bool, iterations: int) -> No
 
 
 def _damped_step(blocks, hessian_model, gradient_model, frozen_model, damping):
-    """The LM step: per-frame pose steps (F, nv) and the placements' step, by Schur complement."""
+    """The LM step: per-frame pose steps (F, nv) and the placements' step, by Schur complement.
+
+    `blocks`: the frames' Hessians (F, nv, nv), gradients (F, nv), couplings to the model unknowns
+    (F, nv, T) and frozen coordinates (F, nv) bool, solved for every frame at once."""
+    hessian, gradient, coupling, pushed = blocks
     theta_count = gradient_model.size
-    schur = hessian_model + damping * np.diag(_damping_scale(hessian_model))
-    rhs = -gradient_model.copy()
-    eliminated = []
-    for hessian, gradient, coupling, pushed in blocks:
-        damped = hessian + damping * np.diag(_damping_scale(hessian))
-        gradient = gradient.copy()
-        coupling = coupling.copy()
-        damped[pushed, :] = 0.0
-        damped[:, pushed] = 0.0
-        damped[pushed, pushed] = 1.0
-        gradient[pushed] = 0.0
-        coupling[pushed, :] = 0.0
-        solved = np.linalg.solve(damped, np.column_stack([gradient, coupling]))
-        eliminated.append(solved)
-        if theta_count:
-            schur -= coupling.T @ solved[:, 1:]
-            rhs += coupling.T @ solved[:, 0]
+    damped = hessian + damping * _diagonal(_damping_scale(hessian))
+    frozen = pushed[:, :, None] | pushed[:, None, :]
+    damped[frozen] = 0.0
+    damped += _diagonal(pushed.astype(float))
+    gradient = np.where(pushed, 0.0, gradient)
+    coupling = np.where(pushed[..., None], 0.0, coupling)
+    solved = np.linalg.solve(damped, np.concatenate([gradient[..., None], coupling], axis=2))  # (F, nv, 1 + T)
     step_model = np.zeros(theta_count)
     if theta_count:
+        schur = hessian_model + damping * np.diag(_damping_scale(hessian_model))
+        stacked = coupling.reshape(-1, theta_count)  # (F nv, T): the frames' sums as one product
+        schur -= stacked.T @ solved[:, :, 1:].reshape(stacked.shape)
+        rhs = -gradient_model + stacked.T @ solved[:, :, 0].reshape(-1)
         free = ~frozen_model
         step_model[free] = np.linalg.solve(schur[np.ix_(free, free)], rhs[free])
-    steps = np.array([-(solved[:, 0] + solved[:, 1:] @ step_model) for solved in eliminated])
+    steps = -(solved[:, :, 0] + np.matmul(solved[:, :, 1:], step_model))
     return steps, step_model
+
+
+def _diagonal(values: np.ndarray) -> np.ndarray:
+    """Diagonal matrices (..., n, n) of the rows of `values` (..., n)."""
+    out = np.zeros((*values.shape, values.shape[-1]))
+    index = np.arange(values.shape[-1])
+    out[..., index, index] = values
+    return out
 
 
 def _damping_scale(hessian: np.ndarray) -> np.ndarray:
     """Levenberg-Marquardt damping per unknown: the Hessian's diagonal, floored at 1e-3 of its
     largest entry so that an unknown the data barely sees (a wrist turn no keypoint follows) cannot
-    take a huge step."""
-    diagonal = np.diag(hessian).copy()
-    return np.maximum(diagonal, 1e-3 * max(float(diagonal.max(initial=0.0)), 1e-12))
+    take a huge step. `hessian` (n, n), or (F, n, n) for F frames at once."""
+    diagonal = np.diagonal(hessian, axis1=-2, axis2=-1).copy()
+    largest = np.max(diagonal, axis=-1, keepdims=True, initial=0.0)
+    return np.maximum(diagonal, 1e-3 * np.maximum(largest, 1e-12))
