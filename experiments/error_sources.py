@@ -11,6 +11,7 @@ Variants (IBIK, `--views` cameras, clean silhouettes, `ibik track --target-filte
 - true leg sums: each leg's thigh + shank the trial's, its split between them as chosen;
 - true leg splits: each leg's split the trial's, its sum as chosen;
 - true legs, true arms: both segments of the limbs the trial's;
+- true arm sums, true arm splits: as for the legs;
 - all exact: every limb length the trial's and noise-free targets. What is left there is the
   tracking's own: the image criterion's peak, the swivel search, the model's joints.
 
@@ -41,7 +42,10 @@ from ibik_pin.io.trc import METRES_PER_UNIT, read_trc, write_trc
 from ibik_pin.subject.scaling import segment_lengths_from_keypoints
 
 LIMB_SEGMENTS = {"leg": ("thigh", "shank"), "arm": ("upper_arm", "forearm")}
-VARIANTS = ("as_run", "exact_targets", "true_leg_sums", "true_leg_splits", "true_legs", "true_arms", "all_exact")
+VARIANTS = ("as_run", "exact_targets", "true_leg_sums", "true_leg_splits", "true_legs", "true_arm_sums",
+            "true_arm_splits", "true_arms", "all_exact")
+TRUE_PARTS = {"true_leg_sums": ("leg", "sum"), "true_leg_splits": ("leg", "split"), "true_legs": ("leg", "both"),
+              "true_arm_sums": ("arm", "sum"), "true_arm_splits": ("arm", "split"), "true_arms": ("arm", "both")}
 GROUPS = ("elbows", "knees")
 TARGET_FILTER = "auto"
 
@@ -88,16 +92,16 @@ def chosen_static(inputs: ConditionInputs, views: int) -> Path:
     return path
 
 
-def condition_row(inputs: ConditionInputs, views: int) -> dict:
-    """Every variant's elbows and knees [mm] on one condition, and the chosen lengths' errors [mm]."""
+def condition_row(inputs: ConditionInputs, views: int, variants: tuple[str, ...] = VARIANTS) -> dict:
+    """`variants`' elbows and knees [mm] on one condition (as run always), and the chosen lengths'
+    errors [mm]."""
     static = chosen_static(inputs, views)
     chosen_file = read_trc(static).in_metres()
     chosen = segment_lengths_from_keypoints(chosen_file.marker_names, chosen_file.positions)
     true = segment_lengths_from_keypoints(inputs.truth_names, inputs.truth)
     base = static_lengths(inputs)
     statics = {"as_run": static, "exact_targets": static}
-    for name, limb, part in (("true_leg_sums", "leg", "sum"), ("true_leg_splits", "leg", "split"),
-                             ("true_legs", "leg", "both"), ("true_arms", "arm", "both")):
+    for name, (limb, part) in TRUE_PARTS.items():
         statics[name] = write_static(inputs, base, with_true_parts(chosen, true, limb, part), f"sources_{name}")
     statics["all_exact"] = write_static(inputs, base, with_true_parts(with_true_parts(chosen, true, "leg", "both"),
                                                                       true, "arm", "both"), "sources_all_exact")
@@ -106,7 +110,7 @@ def condition_row(inputs: ConditionInputs, views: int) -> dict:
            "target_noise_mm": inputs.condition.target_noise_mm,
            "length_errors_mm": {name: 1e3 * (chosen[name] - true[name]) for name in sorted(chosen)
                                 if any(s in name for s in ("thigh", "shank", "arm"))}}
-    for name in VARIANTS:
+    for name in dict.fromkeys(("as_run", *variants)):
         run_inputs = exact if name in ("exact_targets", "all_exact") else inputs
         result = run_condition_variant(run_inputs, f"ibik{views}v", "clean", None, statics[name], TARGET_FILTER)
         row[name] = {group: value for group, value in result.groups_mm().items() if group in GROUPS}
@@ -114,10 +118,10 @@ def condition_row(inputs: ConditionInputs, views: int) -> dict:
 
 
 def summarize(rows: list[dict]) -> dict:
-    """Per variant and group: median and 90th percentile over conditions [mm], and the paired
-    changes against as run (median, better and worse by more than 1 mm)."""
+    """Per variant the rows have and group: median and 90th percentile over conditions [mm], and
+    the paired changes against as run (median, better and worse by more than 1 mm)."""
     summary: dict[str, dict] = {}
-    for name in VARIANTS:
+    for name in (name for name in VARIANTS if name in rows[0]):
         summary[name] = {}
         for group in GROUPS:
             values = np.array([row[name][group] for row in rows])
@@ -144,16 +148,23 @@ def markdown(summary: dict, header: str) -> str:
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     add_kept_arguments(parser, DEFAULT_DATA)
+    parser.add_argument("--variants", default=",".join(VARIANTS),
+                        help="comma-separated, of: " + ", ".join(VARIANTS) + " (as_run always runs)")
     parser.add_argument("--out", type=Path, default=None, help="where error_sources.json and .md go")
     arguments = parser.parse_args(argv)
+    variants = tuple(name.strip() for name in arguments.variants.split(","))
+    unknown = sorted(set(variants) - set(VARIANTS))
+    if unknown:
+        parser.error(f"--variants: unknown {unknown}; known: {', '.join(VARIANTS)}")
     started = time.perf_counter()
     rows = []
     for inputs in kept_conditions(arguments):
-        row = condition_row(inputs, arguments.views)
+        row = condition_row(inputs, arguments.views, variants)
         rows.append(row)
         condition = inputs.condition
         print(f"{condition.index:3d} {condition.motion[:14]:14s} " + "  ".join(
-            f"{name[:12]} {row[name]['elbows']:5.1f}/{row[name]['knees']:5.1f}" for name in VARIANTS), flush=True)
+            f"{name[:12]} {row[name]['elbows']:5.1f}/{row[name]['knees']:5.1f}" for name in VARIANTS if name in row),
+            flush=True)
     summary = summarize(rows)
     command = " ".join(argv or sys.argv[1:])
     header = (f"# Where the error comes from (`python experiments/error_sources.py {command}`)\n\n"
