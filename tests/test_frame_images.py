@@ -534,3 +534,34 @@ def test_the_read_ahead_builds_large_views_on_threads_and_small_ones_in_turn():
     assert read_ahead_workers([(1088, 1920), (640, 480)]) == 1
     assert read_ahead_workers([]) == 1
     assert 640 * 480 < LARGE_VIEW_PIXELS <= 1280 * 800
+
+
+def test_items_built_ahead_come_in_order_the_next_built_while_the_current_is_used():
+    """readahead.view_workers.built_ahead: the values of building in turn, item by item; the next
+    item's build runs while the caller holds the current one; an error comes with its item."""
+    from ibik_pin.readahead.view_workers import built_ahead
+
+    started = {item: threading.Event() for item in range(4)}
+
+    def build(item: int) -> int:
+        started[item].set()
+        return item * item
+
+    taken = []
+    for value in built_ahead(build, range(4)):
+        item = len(taken)
+        if item < 3:  # the next one was started before this one is handed back, or soon after
+            assert started[item + 1].wait(timeout=10.0)
+        taken.append(value)
+    assert taken == [0, 1, 4, 9]
+    assert list(built_ahead(build, [])) == []
+
+    def failing(item: int) -> int:
+        if item == 2:
+            raise InputError("item 2 is bad")
+        return item
+
+    values = built_ahead(failing, range(4))
+    assert [next(values), next(values)] == [0, 1]
+    with pytest.raises(InputError, match="item 2 is bad"):
+        next(values)

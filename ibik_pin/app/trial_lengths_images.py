@@ -22,8 +22,8 @@ import numpy as np
 
 from ibik_pin.exceptions import IbikWarning
 from ibik_pin.model import BodyModel
-from ibik_pin.readahead.frame_images import frame_images
-from ibik_pin.readahead.view_workers import usable_cores
+from ibik_pin.readahead.frame_images import FrameImages, frame_images
+from ibik_pin.readahead.view_workers import built_ahead, usable_cores
 from ibik_pin.subject.scaling import keypoint_lengths
 from ibik_pin.subject.split_cue import refine_split
 from ibik_pin.subject.trial_lengths import TrialLengths, refine_from_images, refine_from_reach
@@ -74,9 +74,13 @@ def refine_lengths_on_images(body: BodyModel, names: list[str], targets_m: np.nd
     def pose(frame: int) -> dict[str, np.ndarray]:
         return {name: first_pass.keypoints[frame, k] for k, name in enumerate(first_pass.keypoint_names)}
 
+    def views(frame: int) -> FrameImages:
+        return frame_images(masks_of_frame, cameras, caps, scales, frame, workers=usable_cores())
+
     def frames() -> Iterator:
-        for frame in sampled:
-            images = frame_images(masks_of_frame, cameras, caps, scales, frame, workers=usable_cores())
+        # The next frame's views are built while this one's grid is scored.
+        built = built_ahead(views, sampled) if usable_cores() > 1 else map(views, sampled)
+        for frame, images in zip(sampled, built, strict=True):
             image_task.set_views(images.views)
             axis_task.set_views(images.axis_views or [])
             yield pose(frame), [(image_task, 1.0), (axis_task, settings.axis_weight)]

@@ -10,11 +10,11 @@ frames. Each view is built exactly as one at a time would build it; only the wal
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import TypeVar
 
-__all__ = ["LARGE_VIEW_PIXELS", "map_views", "read_ahead_workers", "usable_cores"]
+__all__ = ["LARGE_VIEW_PIXELS", "built_ahead", "map_views", "read_ahead_workers", "usable_cores"]
 
 #: A view of at least this many pixels is built on threads in the read-ahead's child. Its images
 #: then take longer than a frame's solve (four 1088 x 1920 views: 58-73 ms on one thread, the solve
@@ -47,6 +47,22 @@ def map_views(build: Callable[[T], R], items: Sequence[T], workers: int) -> list
     if _pool is None or _pool[0] != os.getpid() or _pool[1] < workers:
         _pool = (os.getpid(), workers, ThreadPoolExecutor(max_workers=workers, thread_name_prefix="ibik-views"))
     return list(_pool[2].map(build, items))
+
+
+def built_ahead(build: Callable[[T], R], items: Iterable[T]) -> Iterator[R]:
+    """build(item) for each item, in order, the next item's built on a thread while the caller works
+    on the current one: the subject calibration's passes score a frame in Python while the next
+    frame's views are built in compiled kernels that release the GIL. The same values as
+    [build(item) for item in items]; an exception in a build is raised where its item is taken."""
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="ibik-ahead") as executor:
+        pending = None
+        for item in items:
+            future = executor.submit(build, item)
+            if pending is not None:
+                yield pending.result()
+            pending = future
+        if pending is not None:
+            yield pending.result()
 
 
 def read_ahead_workers(sizes: Sequence[tuple[int, int]]) -> int:

@@ -29,7 +29,7 @@ import numpy as np
 
 from ibik_pin.exceptions import InputError
 from ibik_pin.model import BodyModel
-from ibik_pin.readahead.view_workers import map_views
+from ibik_pin.readahead.view_workers import built_ahead, map_views
 from ibik_pin.subject.trial_lengths import LIMBS, TrialLengths, refine_from_images
 from ibik_pin.vision.camera import CameraLike
 from ibik_pin.vision.medial_axis import axis_distance_image
@@ -78,18 +78,18 @@ class AxisDistanceCue:
         self._views: list[tuple[CameraLike, np.ndarray, float, float]] = []
         self.enabled = False
 
-    def set_views(self, cameras: Sequence[CameraLike], distances: Sequence[np.ndarray],
+    def set_views(self, cameras: Sequence[CameraLike], distances: Sequence[np.ndarray | None],
                   robust_scales_px: Sequence[float], clearances_px: Sequence[float]) -> None:
         """One frame's views: per camera its axis_distance_image [px], robust scale c [px] and the
         clearance [px] another segment keeps from a sample read. A view without any axis pixel (an
-        empty silhouette) is left out."""
+        empty silhouette; None, or an image of +inf only) is left out."""
         if not len(cameras) == len(distances) == len(robust_scales_px) == len(clearances_px):
             raise InputError(f"expected one distance image, scale and clearance per camera ({len(cameras)}), got "
                              f"{len(distances)}, {len(robust_scales_px)} and {len(clearances_px)}")
         self._views = [(camera, np.asarray(distance), float(scale), float(clearance))
                        for camera, distance, scale, clearance in zip(cameras, distances, robust_scales_px,
                                                                      clearances_px, strict=True)
-                       if np.isfinite(distance).any()]
+                       if distance is not None and np.isfinite(distance).any()]
         self.enabled = bool(self._views)
 
     def at_pose(self, positions: np.ndarray) -> None:
@@ -170,10 +170,12 @@ CLEARANCE_M = 0.15
 FLAT_BEYOND = 7.0
 
 
-def _centre_line_image(view: tuple[np.ndarray, float]) -> np.ndarray:
-    """A view's axis_distance_image from its silhouette and robust scale [px], as far out as the cue reads."""
+def _centre_line_image(view: tuple[np.ndarray, float]) -> np.ndarray | None:
+    """A view's axis_distance_image from its silhouette and robust scale [px], as far out as the cue
+    reads; None without any centre-line pixel (decided here, on the view's worker)."""
     mask, scale = view
-    return axis_distance_image(mask, within_px=FLAT_BEYOND * scale)
+    image = axis_distance_image(mask, within_px=FLAT_BEYOND * scale)
+    return image if np.isfinite(image).any() else None
 
 
 def refine_split(body: BodyModel, legs: TrialLengths, poses: Sequence[Mapping[str, np.ndarray]],
@@ -190,8 +192,8 @@ def refine_split(body: BodyModel, legs: TrialLengths, poses: Sequence[Mapping[st
         poses: per frame refine_from_images read, keypoint name -> position (3,) [m].
         masks_of_pose: index into `poses` -> one silhouette per camera.
         subject_position: (3,) [m] where the scales in pixels are taken.
-        workers: threads building a frame's views' centre-line images side by side
-            (readahead.view_workers: the same images).
+        workers: threads building a frame's views' centre-line images side by side, the next
+            frame's while this one is scored (readahead.view_workers: the same images).
 
     Returns:
         The lengths with the split chosen; per limb the evidence of `legs` with "split" added.
@@ -202,10 +204,13 @@ def refine_split(body: BodyModel, legs: TrialLengths, poses: Sequence[Mapping[st
     robust = [float(max(camera.pixel_radius(centre, np.array([ROBUST_SCALE_M]))[0], 1.0)) for camera in cameras]
     clearance = [float(max(camera.pixel_radius(centre, np.array([CLEARANCE_M]))[0], 1.0)) for camera in cameras]
 
+    def centre_lines(index: int) -> list[np.ndarray | None]:
+        return map_views(_centre_line_image, list(zip(masks_of_pose(index), robust, strict=True)), workers)
+
     def frames() -> Iterator:
-        for index, pose in enumerate(poses):
-            views = list(zip(masks_of_pose(index), robust, strict=True))
-            cue.set_views(cameras, map_views(_centre_line_image, views, workers), robust, clearance)
+        built = built_ahead(centre_lines, range(len(poses))) if workers > 1 else map(centre_lines, range(len(poses)))
+        for index, (pose, images) in enumerate(zip(poses, built, strict=True)):
+            cue.set_views(cameras, images, robust, clearance)
             placed = dict(pose)
             placed.update({LIMBS[name].middle: legs.middles[name][index] for name in chosen})
             yield placed, [(cue, 1.0)]
