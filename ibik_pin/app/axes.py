@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -307,3 +307,56 @@ def choose_axes(
         f"--trc-axes auto: neither the cameras nor the body's posture tell the TRC's axis convention "
         f"({evidence}); pass --trc-axes y-up (Pose2Sim, OpenSim) or --trc-axes z-up (the calibration's world)"
     )
+
+
+@dataclass
+class TrcAxesReport:
+    """The axis convention the TRC files were read and written in (app.axes).
+
+    Attributes:
+        used: "y-up" or "z-up".
+        how: "detected", "forced" (--trc-axes), "default" (no calibration to detect against) or
+            "triangulated" (the targets were triangulated from --videos in the model's Y-up frame) or
+            "declared by the C3D file" (its POINT:Y_SCREEN, the axis drawn upward).
+        decided_by: when detected, what told the conventions apart: "silhouettes", "images" or
+            "upright body".
+        description: the convention in words, and which outputs it applies to.
+        inside_images: per convention, the fraction of the sampled targets' projections in front
+            of a camera and inside its image [0-1]; empty without a calibration.
+        inside_silhouettes: per convention, the fraction inside the silhouettes [0-1]; empty
+            without silhouettes.
+        upright_cosine: per convention, the median cosine between the body's feet-to-head
+            direction and the model's up [-1, 1]; empty without head and foot targets.
+        sampled_frames: TRC frame numbers of the frames these were measured on.
+    """
+
+    used: str
+    how: str
+    decided_by: str
+    description: str
+    inside_images: dict[str, float] = field(default_factory=dict)
+    inside_silhouettes: dict[str, float] = field(default_factory=dict)
+    upright_cosine: dict[str, float] = field(default_factory=dict)
+    sampled_frames: list[int] = field(default_factory=list)
+
+    @classmethod
+    def from_choice(cls, choice: AxesChoice, frame_numbers: np.ndarray) -> TrcAxesReport:
+        description = (f"{AXES_DESCRIPTIONS[choice.axes]}; the targets were read and joints.trc written "
+                       "in it; q.csv, motion.mot and motion.bvh are in the model's frame (Y up)")
+        if choice.how == "default":
+            description += "; no --calibration to detect it against, so Pose2Sim's y-up was assumed"
+
+        def per_axes(name: str) -> dict[str, float]:
+            values = {score.axes: getattr(score, name) for score in choice.scores}
+            return {axes: float(value) for axes, value in values.items() if value is not None}
+
+        return cls(
+            used=choice.axes,
+            how=choice.how,
+            decided_by=choice.decided_by,
+            description=description,
+            inside_images=per_axes("inside_images"),
+            inside_silhouettes=per_axes("inside_silhouettes"),
+            upright_cosine=per_axes("upright"),
+            sampled_frames=[int(frame_numbers[index]) for index in choice.sampled_frames],
+        )

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from ibik_pin.app.axes import AXES_DESCRIPTIONS, AxesChoice
+from ibik_pin.app.axes import AxesChoice, TrcAxesReport
 from ibik_pin.app.input_reports import SilhouetteQuality, TriangulationReport
 from ibik_pin.app.report_units import FRAME_NUMBERING, UNITS
 from ibik_pin.app.video_people import PeopleReport
@@ -57,59 +57,6 @@ class ResidualStats:
             return cls(None, None, None, [None] * len(values_m))
         return cls(float(np.mean(present)), float(np.median(present)), float(np.max(present)),
                    [_finite_or_none(value) for value in values_m])
-
-
-@dataclass
-class TrcAxesReport:
-    """The axis convention the TRC files were read and written in (app.axes).
-
-    Attributes:
-        used: "y-up" or "z-up".
-        how: "detected", "forced" (--trc-axes), "default" (no calibration to detect against) or
-            "triangulated" (the targets were triangulated from --videos in the model's Y-up frame) or
-            "declared by the C3D file" (its POINT:Y_SCREEN, the axis drawn upward).
-        decided_by: when detected, what told the conventions apart: "silhouettes", "images" or
-            "upright body".
-        description: the convention in words, and which outputs it applies to.
-        inside_images: per convention, the fraction of the sampled targets' projections in front
-            of a camera and inside its image [0-1]; empty without a calibration.
-        inside_silhouettes: per convention, the fraction inside the silhouettes [0-1]; empty
-            without silhouettes.
-        upright_cosine: per convention, the median cosine between the body's feet-to-head
-            direction and the model's up [-1, 1]; empty without head and foot targets.
-        sampled_frames: TRC frame numbers of the frames these were measured on.
-    """
-
-    used: str
-    how: str
-    decided_by: str
-    description: str
-    inside_images: dict[str, float] = field(default_factory=dict)
-    inside_silhouettes: dict[str, float] = field(default_factory=dict)
-    upright_cosine: dict[str, float] = field(default_factory=dict)
-    sampled_frames: list[int] = field(default_factory=list)
-
-    @classmethod
-    def from_choice(cls, choice: AxesChoice, frame_numbers: np.ndarray) -> TrcAxesReport:
-        description = (f"{AXES_DESCRIPTIONS[choice.axes]}; the targets were read and joints.trc written "
-                       "in it; q.csv, motion.mot and motion.bvh are in the model's frame (Y up)")
-        if choice.how == "default":
-            description += "; no --calibration to detect it against, so Pose2Sim's y-up was assumed"
-
-        def per_axes(name: str) -> dict[str, float]:
-            values = {score.axes: getattr(score, name) for score in choice.scores}
-            return {axes: float(value) for axes, value in values.items() if value is not None}
-
-        return cls(
-            used=choice.axes,
-            how=choice.how,
-            decided_by=choice.decided_by,
-            description=description,
-            inside_images=per_axes("inside_images"),
-            inside_silhouettes=per_axes("inside_silhouettes"),
-            upright_cosine=per_axes("upright"),
-            sampled_frames=[int(frame_numbers[index]) for index in choice.sampled_frames],
-        )
 
 
 @dataclass

@@ -5,11 +5,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
+from ibik_pin.exceptions import InputError
+from ibik_pin.readahead.frames_ahead import READ_AHEAD_MODES
 from ibik_pin.solvers import DEFAULT_QP_SOLVER
-from ibik_pin.tracking.stack import Stack
+from ibik_pin.tracking.stack import CRITERIA, Stack
 from ibik_pin.tracking.swivel_smoothing import SWIVEL_CUTOFF_HZ
 
-__all__ = ["IMAGE_MOVES", "IMAGE_STOPS", "TrackingSettings"]
+__all__ = ["IMAGE_MOVES", "IMAGE_STOPS", "TrackingSettings", "check_settings"]
 
 # Which coordinates a frame's image steps move (TrackingSettings.image_moves).
 IMAGE_MOVES = ("limbs", "all")
@@ -119,3 +123,27 @@ class TrackingSettings:
     stack: Stack | None = None
     swivel_cutoff_hz: float | None = SWIVEL_CUTOFF_HZ
     read_ahead: str = "process"
+
+
+def _positive_or_none(value: object) -> bool:
+    return value is None or (not isinstance(value, bool) and isinstance(value, (int, float))
+                             and bool(np.isfinite(value)) and value > 0)
+
+
+def check_settings(settings: TrackingSettings) -> None:
+    """Refuse settings the tracker cannot run (one InputError naming the field); the stack's
+    names and the QP backend are checked where they are read."""
+    for name, value, choices in (("criterion", settings.criterion, CRITERIA),
+                                 ("image_moves", settings.image_moves, IMAGE_MOVES),
+                                 ("read_ahead", settings.read_ahead, READ_AHEAD_MODES),
+                                 ("image_stop", settings.image_stop, IMAGE_STOPS)):
+        if value not in choices:
+            raise InputError(f"{name}: expected one of {', '.join(choices)}, found {value!r}")
+    if int(settings.target_iterations) < 1:
+        raise InputError(f"target_iterations: expected at least 1, found {settings.target_iterations}")
+    if not _positive_or_none(settings.target_step_tolerance):
+        raise InputError(f"target_step_tolerance: expected None or a positive number of radians, found "
+                         f"{settings.target_step_tolerance!r}", parameter="target_step_tolerance")
+    if not _positive_or_none(settings.swivel_cutoff_hz):
+        raise InputError(f"swivel_cutoff_hz: expected None or a positive cutoff in Hz, found "
+                         f"{settings.swivel_cutoff_hz!r}", parameter="swivel_cutoff_hz")

@@ -16,22 +16,28 @@ reference direction and lets the frames of a nearly straight limb, whose swivel 
 little. On the sweep (42 conditions, 2 views, clean; docs/sweep.md), applied to the runs' joints
 this way, the cutoffs 4 to 8 Hz left no condition worse by more than 1 mm; 1.5-3 Hz did.
 
-The tracker then moves each changed joint there by a few solver steps under the targets
-(Tracker.track's `frame_rate_hz`).
+:func:`smooth_swivels` finds every free joint's place and has the tracker move the joints there,
+frame by frame, under the targets (Tracker.track's `frame_rate_hz`).
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
 from ibik_pin.exceptions import InputError
 from ibik_pin.tracking.butterworth import design_lowpass, zero_lag_lowpass
+from ibik_pin.tracking.swivel import LIMB_ENDS
 from ibik_pin.tracking.target_filter import MIN_RUN_FRAMES, MOTION_BAND_HZ, PASS_CORRECTION
 
-__all__ = ["SWIVEL_CUTOFF_HZ", "parse_swivel_cutoff", "smoothed_middles", "smoothing_possible"]
+__all__ = ["MIN_MOVE_M", "SWIVEL_CUTOFF_HZ", "parse_swivel_cutoff", "smooth_swivels", "smoothed_middles",
+           "smoothing_possible"]
 
 #: The swivels' cutoff [Hz]: the band of human joint motion (tracking.target_filter.MOTION_BAND_HZ).
 SWIVEL_CUTOFF_HZ = MOTION_BAND_HZ
+#: A joint is moved only if its smoothed place lies farther than this [m].
+MIN_MOVE_M = 5e-4
 
 
 def parse_swivel_cutoff(value: str | float | None) -> float | None:
@@ -102,3 +108,55 @@ def smoothed_middles(roots: np.ndarray, middles: np.ndarray, ends: np.ndarray, r
         moved = centre[start:stop] + smooth * (radius[start:stop] / np.maximum(norm, 1e-12))
         out[start:stop][keep] = moved[keep]
     return out
+
+
+def smooth_swivels(keypoint_names: Sequence[str], keypoints: np.ndarray, names: Sequence[str], targets: np.ndarray,
+                   rate_hz: float, cutoff_hz: float,
+                   move: Callable[[int, dict[str, np.ndarray]], None]) -> dict:
+    """Every free elbow and knee (LIMB_ENDS; a target's where it is absent) moved to its smoothed
+    place in each frame where one lies farther than MIN_MOVE_M from it.
+
+    Args:
+        keypoint_names, keypoints: the solved frames' keypoints (F, K, 3) [m], which `move` updates.
+        names, targets: the targets (F, T, 3) [m], NaN where absent.
+        move: (frame, name -> place (3,) [m]) moves that frame's joints and updates `keypoints`.
+
+    Returns:
+        The report (TrackingResult.swivel_smoothing): the cutoff and frame rate, whether it ran (and
+        why not), the frames moved, per joint how far it moved and how far from its place it ended
+        [mm], median and max over its free frames.
+    """
+    report: dict = {"cutoff_hz": cutoff_hz, "frame_rate_hz": rate_hz}
+    if not smoothing_possible(rate_hz, cutoff_hz):
+        return {**report, "applied": False,
+                "why": f"at {rate_hz:g} frames/s a {cutoff_hz:g} Hz cutoff lies above the Nyquist frequency"}
+    row = {name: k for k, name in enumerate(keypoint_names)}
+    limbs = [name for name in LIMB_ENDS if name in row and all(end in row for end in LIMB_ENDS[name])]
+    present = np.isfinite(targets).all(axis=2)
+    places = {}
+    for name in limbs:
+        middles = keypoints[:, row[name]].copy()
+        if name in names:  # a target where present: not the image's to place
+            middles[present[:, list(names).index(name)]] = np.nan
+        root, end = LIMB_ENDS[name]
+        places[name] = smoothed_middles(keypoints[:, row[root]], middles, keypoints[:, row[end]], rate_hz, cutoff_hz)
+    before = keypoints.copy()
+    moved_frames = 0
+    for frame in range(keypoints.shape[0]):
+        moving = {name: places[name][frame] for name in limbs
+                  if np.linalg.norm(places[name][frame] - before[frame, row[name]]) > MIN_MOVE_M}
+        if moving:
+            moved_frames += 1
+            move(frame, moving)
+
+    def stats(distances: np.ndarray) -> dict:
+        return {"median": float(np.median(distances) * 1e3) if distances.size else None,
+                "max": float(np.max(distances) * 1e3) if distances.size else None}
+
+    joints = {}
+    for name in limbs:
+        free = np.isfinite(places[name]).all(axis=1)
+        joints[name] = {"moved_mm": stats(np.linalg.norm(keypoints[free, row[name]] - before[free, row[name]], axis=1)),
+                        "off_smoothed_mm": stats(np.linalg.norm(keypoints[free, row[name]] - places[name][free],
+                                                                axis=1))}
+    return {**report, "applied": True, "frames_moved": moved_frames, "joints": joints}

@@ -5,10 +5,9 @@ ibik_pin/data/default_stack.toml): every keypoint present in the targets is an e
 (level 1: pelvis and legs, level 2: trunk, head and arms); the image criterion is level 3 and a
 light posture prior level 4. Each frame first takes a few steps with the targets alone, searches
 the free elbows' and knees' swivels (tracking.swivel), then takes its image steps with the root,
-spine, clavicles and neck held (Tracker._solve). Given the frames' rate, once every frame is solved
-the free elbows' and knees' swivels are low-passed over the trial and each changed joint moved there
-under the targets (tracking.swivel_smoothing). With `use_image=False` the targets' levels run
-alone: the blind PIK baseline (same targets, iterations, initial state and limits).
+spine, clavicles and neck held (Tracker._solve); once every frame is solved, the free elbows' and
+knees' swivels are low-passed over the trial (tracking.swivel_smoothing). With `use_image=False` the
+targets' levels run alone: the blind PIK baseline (same targets, iterations, initial state and limits).
 """
 
 from __future__ import annotations
@@ -30,7 +29,7 @@ from ibik_pin.limits import JointLimits
 from ibik_pin.model import BodyModel
 from ibik_pin.names import unknown_names_message
 from ibik_pin.readahead.frame_images import FrameImages, frame_images
-from ibik_pin.readahead.frames_ahead import READ_AHEAD_MODES, FrameImagesAhead
+from ibik_pin.readahead.frames_ahead import FrameImagesAhead
 from ibik_pin.readahead.image_process import FrameRecords, can_fork
 from ibik_pin.readahead.view_workers import read_ahead_workers
 from ibik_pin.solvers import SolveResult, make_solver
@@ -46,17 +45,15 @@ from ibik_pin.tracking.levels import StackPlan, StackTasks
 from ibik_pin.tracking.outcomes import LevelOutcome, level_outcomes
 from ibik_pin.tracking.result import TrackingResult
 from ibik_pin.tracking.search_cadence import SearchCadence
-from ibik_pin.tracking.settings import IMAGE_MOVES, IMAGE_STOPS, TrackingSettings
-from ibik_pin.tracking.stack import CRITERIA, Stack
+from ibik_pin.tracking.settings import TrackingSettings, check_settings
+from ibik_pin.tracking.stack import Stack
 from ibik_pin.tracking.swivel import LIMB_ENDS, SwivelSearch, views_cross
-from ibik_pin.tracking.swivel_smoothing import smoothed_middles, smoothing_possible
+from ibik_pin.tracking.swivel_smoothing import smooth_swivels
 from ibik_pin.tracking.views import initial_configuration, support_caps, target_boxes
 from ibik_pin.vision.segmentation import TemporalMajority
 
 # A frame's silhouettes: one (H, W) bool mask per camera, in the cameras' order.
 SilhouetteSource = Callable[[int], Sequence[np.ndarray]]
-# The swivel smoothing moves a joint only if its smoothed place lies farther than this [m].
-SMOOTHING_MIN_MOVE_M = 5e-4
 
 
 def _take_outcomes(result: TrackingResult, offloaded: dict[int, object]) -> None:
@@ -80,6 +77,7 @@ class Tracker:
                                 image_step=image.step or settings.image_step) if image else settings
         if self.stack.qp_solver is not None:
             self.settings = replace(self.settings, qp_solver=self.stack.qp_solver)
+        check_settings(self.settings)
         self.cameras = [camera for camera in cameras if image is None or image.views is None
                         or camera.name in image.views]
         model = body.model
@@ -87,8 +85,6 @@ class Tracker:
         self.solver = make_solver(self.settings.method, limits=self.limits, qp_solver=self.settings.qp_solver)
         self.image_task = ImageTask(body, (), samples_per_segment=self.settings.samples_per_segment,
                                     max_step_size=self.settings.image_step)
-        if self.settings.criterion not in CRITERIA:
-            raise InputError(f"criterion: expected one of {', '.join(CRITERIA)}, found {self.settings.criterion!r}")
         self.axis_task = SilhouetteAxisTask(body, max_step_size=self.settings.image_step)
         terms: list[tuple[SegmentCriterion, float]] = [(self.image_task, 1.0)]
         if self.settings.criterion == "two-way":
@@ -101,27 +97,6 @@ class Tracker:
         self.swivel = SwivelSearch(body, terms, inside_silhouettes=self.image_task.inside_silhouettes,
                                    refine=int(self.settings.swivel_refine))
         self.search_cadence = SearchCadence(body, self.settings.swivel_cadence, self.swivel.min_radius)
-        if self.settings.image_moves not in IMAGE_MOVES:
-            raise InputError(f"image_moves: expected one of {', '.join(IMAGE_MOVES)}, "
-                             f"found {self.settings.image_moves!r}")
-        if self.settings.read_ahead not in READ_AHEAD_MODES:
-            raise InputError(f"read_ahead: expected one of {', '.join(READ_AHEAD_MODES)}, "
-                             f"found {self.settings.read_ahead!r}")
-        if self.settings.image_stop not in IMAGE_STOPS:
-            raise InputError(f"image_stop: expected one of {', '.join(IMAGE_STOPS)}, "
-                             f"found {self.settings.image_stop!r}")
-        if int(self.settings.target_iterations) < 1:
-            raise InputError(f"target_iterations: expected at least 1, found {self.settings.target_iterations}")
-        tolerance = self.settings.target_step_tolerance
-        if tolerance is not None and (isinstance(tolerance, bool) or not isinstance(tolerance, (int, float))
-                                      or not np.isfinite(tolerance) or tolerance <= 0):
-            raise InputError(f"target_step_tolerance: expected None or a positive number of radians, found "
-                             f"{tolerance!r}", parameter="target_step_tolerance")
-        cutoff = self.settings.swivel_cutoff_hz
-        if cutoff is not None and (isinstance(cutoff, bool) or not isinstance(cutoff, (int, float))
-                                   or not np.isfinite(cutoff) or cutoff <= 0):
-            raise InputError(f"swivel_cutoff_hz: expected None or a positive cutoff in Hz, found {cutoff!r}",
-                             parameter="swivel_cutoff_hz")
         held = ~body.limb_coordinates
         # Holds the trunk during the image steps (_solve). A strict level: ik and liegeois, which merge
         # every level above the image into one task (eq. 3, 4), run the paper's scheme instead.
@@ -228,10 +203,9 @@ class Tracker:
             targets: (F, K, 3) target positions [m] in the model's frame; NaN = absent that frame.
             silhouettes: frame index -> one mask per camera; needed when the image is used.
             progress: called once per solved frame.
-            frame_rate_hz: the frames' rate, the frames taken as consecutive. With the image and
-                settings.swivel_cutoff_hz, the free elbows' and knees' swivels are then low-passed
-                over the trial once every frame is solved (tracking.swivel_smoothing; its time
-                counts in solve_seconds); None: each frame's own solution is kept.
+            frame_rate_hz: the frames' rate (taken as consecutive): with the image, the free elbows'
+                and knees' swivels are then low-passed at settings.swivel_cutoff_hz (tracking.
+                swivel_smoothing, timed in solve_seconds); None: each frame's own solution is kept.
         """
         unknown = [name for name in names if name not in self.body.keypoints]
         if unknown:
@@ -371,68 +345,31 @@ class Tracker:
 
     def _smooth_swivels(self, result: TrackingResult, plan: StackPlan, names: list[str], targets: np.ndarray,
                         configuration: Configuration, rate_hz: float, cutoff_hz: float) -> dict:
-        """Each free elbow and knee moved to its swivel low-passed over the trial (module docstring):
-        in every frame where one lies farther than SMOOTHING_MIN_MOVE_M from its smoothed place, a
-        few steps under the targets' levels (and the trunk held, as for the image steps) with the
-        moved joints held there below them, then the targets' closing step. Updates result's poses,
-        keypoints and target distances (the overlaps and level outcomes stay those of the frame's own
-        solve); returns its report."""
-        report: dict = {"cutoff_hz": cutoff_hz, "frame_rate_hz": rate_hz}
-        if not smoothing_possible(rate_hz, cutoff_hz):
-            return {**report, "applied": False,
-                    "why": f"at {rate_hz:g} frames/s a {cutoff_hz:g} Hz cutoff lies above the Nyquist frequency"}
-        row = {name: k for k, name in enumerate(result.keypoint_names)}
-        limbs = [name for name in LIMB_ENDS if name in row and all(end in row for end in LIMB_ENDS[name])]
-        present = np.isfinite(targets).all(axis=2)
-        wanted = {}
-        for name in limbs:
-            middles = result.keypoints[:, row[name]].copy()
-            if name in names:  # a target where present: not the image's to place
-                middles[present[:, names.index(name)]] = np.nan
-            root, end = LIMB_ENDS[name]
-            wanted[name] = smoothed_middles(result.keypoints[:, row[root]], middles, result.keypoints[:, row[end]],
-                                            rate_hz, cutoff_hz)
-        before = result.keypoints.copy()
+        """tracking.swivel_smoothing.smooth_swivels, each frame's moved joints held at their places
+        below the targets' levels (the trunk held, as for the image steps), then the closing step."""
         keypoint_ids = self.body.frame_ids(result.keypoint_names)
         target_ids = np.array([self.tasks.target_tasks[name].frame_id for name in names])
         above_image = list(plan.solver_levels[:plan.image_level])
-        moved_frames = 0
-        for frame in range(result.q.shape[0]):
-            moving = [name for name in limbs
-                      if np.linalg.norm(wanted[name][frame] - before[frame, row[name]]) > SMOOTHING_MIN_MOVE_M]
-            if not moving:
-                continue
-            moved_frames += 1
+
+        def move(frame: int, places: dict[str, np.ndarray]) -> None:
             configuration.update(result.q[frame])
-            frame_present = self._set_targets(names, targets[frame])
-            levels: list[Sequence] = [*above_image, [self._hint_task(name, wanted[name][frame]) for name in moving]]
+            present = self._set_targets(names, targets[frame])
+            levels: list[Sequence] = [*above_image, [self._hint_task(name, place) for name, place in places.items()]]
             if self._trunk_hold is not None:
                 self._trunk_hold.set_reference(configuration.q)
                 levels = [[self._trunk_hold], *levels]
             self.solver.solve(configuration, levels, iterations=int(self.settings.target_iterations),
                               tolerance=self.settings.target_step_tolerance)
-            # The closing step of _solve: the toes and heels back through the ankles (a foot point's
-            # task sees only the ankle, and the hip's turn moved the foot).
+            # The closing step of _solve: the toes and heels back through the ankles.
             self.solver.solve(configuration, levels[:-1], iterations=1)
             result.q[frame] = configuration.q
             result.keypoints[frame] = configuration.frame_positions(keypoint_ids)
-            errors = np.linalg.norm(configuration.frame_positions(target_ids[frame_present])
-                                    - targets[frame, frame_present], axis=1)
-            result.target_distances[frame, frame_present] = errors
+            errors = np.linalg.norm(configuration.frame_positions(target_ids[present]) - targets[frame, present],
+                                    axis=1)
+            result.target_distances[frame, present] = errors
             result.target_residuals[frame] = np.mean(errors) if errors.size else np.nan
-        report["applied"] = True
-        report["frames_moved"] = moved_frames
-        report["joints"] = {}
-        for name in limbs:
-            moved = np.linalg.norm(result.keypoints[:, row[name]] - before[:, row[name]], axis=1)
-            missed = np.linalg.norm(result.keypoints[:, row[name]] - wanted[name], axis=1)
-            free = np.isfinite(wanted[name]).all(axis=1)
-            report["joints"][name] = {
-                "moved_mm": {"median": float(np.median(moved[free]) * 1e3) if free.any() else None,
-                             "max": float(np.max(moved[free]) * 1e3) if free.any() else None},
-                "off_smoothed_mm": {"median": float(np.median(missed[free]) * 1e3) if free.any() else None,
-                                    "max": float(np.max(missed[free]) * 1e3) if free.any() else None}}
-        return report
+
+        return smooth_swivels(result.keypoint_names, result.keypoints, names, targets, rate_hz, cutoff_hz, move)
 
     def _set_targets(self, names: list[str], frame_targets: np.ndarray) -> np.ndarray:
         """Give each target task its position of the frame (K, 3), or switch it off where absent (NaN);
