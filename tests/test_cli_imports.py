@@ -68,7 +68,7 @@ def test_the_ibik_command_runs_openblas_on_one_thread_unless_the_user_says_other
 
 def test_the_criterion_choices_of_the_cli_are_the_trackers():
     from ibik_pin.cli import build_parser
-    from ibik_pin.tracking.tracker import CRITERIA
+    from ibik_pin.tracking.stack import CRITERIA
 
     track = build_parser()._subparsers._group_actions[0].choices["track"]
     criterion = next(action for action in track._actions if action.dest == "criterion")
