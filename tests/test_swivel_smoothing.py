@@ -58,14 +58,15 @@ def test_a_smooth_swivel_is_left_nearly_as_it_is():
     assert np.linalg.norm(smoothed - truth, axis=1).max() < 1e-3  # a 1 Hz swing passes a 6 Hz cutoff
 
 
-def test_missing_frames_split_the_runs_stay_missing_and_short_runs_are_left():
+def test_missing_frames_stay_missing_a_short_gap_is_bridged_a_long_one_splits_and_short_runs_are_left():
     roots, ends, _, jittered = swinging_limb(60, 0.1)
-    jittered[20] = np.nan  # the joint was a target there
-    jittered[54] = np.nan  # leaves a last run of 5 frames, too short to filter
+    jittered[20] = np.nan  # the joint was a target there: bridged for the filter (as the targets')
+    jittered[36:55] = np.nan  # 0.63 s: splits, and leaves a last run of 5 frames, too short to filter
     smoothed = smoothed_middles(roots, jittered, ends, RATE_HZ, 6.0)
-    assert np.isnan(smoothed[[20, 54]]).all()
+    assert np.isnan(smoothed[[20, *range(36, 55)]]).all()
     np.testing.assert_array_equal(smoothed[55:], jittered[55:])
     assert np.linalg.norm(smoothed[:20] - jittered[:20], axis=1).max() > 1e-3
+    assert np.linalg.norm(smoothed[21:36] - jittered[21:36], axis=1).max() > 1e-3
 
 
 def test_a_cutoff_the_frame_rate_cannot_carry_is_refused_and_said_so():

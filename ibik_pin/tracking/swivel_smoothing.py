@@ -8,8 +8,8 @@ motion lies below about 6 Hz, Winter, Biomechanics and Motor Control of Human Mo
 figure tracking.target_filter uses for the targets).
 
 So once every frame is solved, each limb's offset from the centre of its circle (the middle joint
-less its foot on the root-end line, a 3-vector) is low-passed over time with the zero-lag
-Butterworth filter of the targets (tracking.butterworth), projected back onto the frame's circle
+less its foot on the root-end line, a 3-vector) is low-passed over time with the targets' zero-lag
+filter (tracking.target_filter.lowpass), projected back onto the frame's circle
 plane and brought back to the frame's radius: the limb's lengths and ends are the frame's own,
 only the direction about the line changes. Filtering the vector rather than an angle needs no
 reference direction and lets the frames of a nearly straight limb, whose swivel is undefined, weigh
@@ -27,9 +27,8 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from ibik_pin.exceptions import InputError
-from ibik_pin.tracking.butterworth import design_lowpass, zero_lag_lowpass
 from ibik_pin.tracking.swivel import LIMB_ENDS
-from ibik_pin.tracking.target_filter import MIN_RUN_FRAMES, MOTION_BAND_HZ, PASS_CORRECTION
+from ibik_pin.tracking.target_filter import MOTION_BAND_HZ, PASS_CORRECTION, lowpass
 
 __all__ = ["MIN_MOVE_M", "SWIVEL_CUTOFF_HZ", "parse_swivel_cutoff", "smooth_swivels", "smoothed_middles",
            "smoothing_possible"]
@@ -71,9 +70,9 @@ def smoothed_middles(roots: np.ndarray, middles: np.ndarray, ends: np.ndarray, r
 
     Args:
         roots, middles, ends: (F, 3) the limb's joints in consecutive frames; a frame with any NaN
-            (the joint was a target there, or the frame is missing) splits the trial into runs,
-            each filtered on its own; runs shorter than the target filter's MIN_RUN_FRAMES, and
-            frames whose limb is straight or whose ends coincide, are left as they are.
+            (the joint was a target there, or the frame is missing) is a gap, bridged or splitting
+            the trial as the targets' filter does (tracking.target_filter.lowpass: runs too short
+            are left as they are); frames whose limb is straight or whose ends coincide are left too.
         rate_hz: the frames' rate; cutoff_hz: the zero-lag response's -3 dB point.
 
     Returns:
@@ -85,28 +84,19 @@ def smoothed_middles(roots: np.ndarray, middles: np.ndarray, ends: np.ndarray, r
     if not smoothing_possible(rate_hz, cutoff_hz):
         raise ValueError(f"a {cutoff_hz:g} Hz cutoff cannot be designed at {rate_hz:g} frames/s")
     roots, middles, ends = (np.asarray(values, dtype=float) for values in (roots, middles, ends))
-    out = middles.copy()
     axis = ends - roots
     length = np.linalg.norm(axis, axis=1, keepdims=True)
     axis = axis / np.maximum(length, 1e-12)
     centre = roots + np.sum((middles - roots) * axis, axis=1, keepdims=True) * axis
-    offset = middles - centre
+    offset = np.where(length > 1e-9, middles - centre, np.nan)
     radius = np.linalg.norm(offset, axis=1, keepdims=True)
-    usable = np.isfinite(offset).all(axis=1) & (length[:, 0] > 1e-9)
-    b, a = design_lowpass(_design_fraction(rate_hz, cutoff_hz))
-    edges = np.flatnonzero(np.diff(np.concatenate(([0], usable.astype(np.int8), [0]))))
-    for start, stop in zip(edges[::2], edges[1::2], strict=True):
-        if stop - start < MIN_RUN_FRAMES:
-            continue
-        # Padding as the target filter's: two periods of the cutoff, within the run.
-        pad = min(stop - start - 1, max(9, int(np.ceil(2.0 * rate_hz / cutoff_hz))))
-        smooth = zero_lag_lowpass(b, a, offset[start:stop], pad)
-        run_axis = axis[start:stop]
-        smooth -= np.sum(smooth * run_axis, axis=1, keepdims=True) * run_axis
-        norm = np.linalg.norm(smooth, axis=1, keepdims=True)
-        keep = (norm[:, 0] > 1e-9) & (radius[start:stop, 0] > 1e-9)
-        moved = centre[start:stop] + smooth * (radius[start:stop] / np.maximum(norm, 1e-12))
-        out[start:stop][keep] = moved[keep]
+    smooth = lowpass(offset, rate_hz, cutoff_hz)
+    filtered = np.isfinite(offset).all(axis=1) & np.any(smooth != offset, axis=1)  # short runs are left
+    smooth -= np.sum(smooth * axis, axis=1, keepdims=True) * axis  # back into the circle's plane
+    norm = np.linalg.norm(smooth, axis=1, keepdims=True)
+    moved = filtered & (norm[:, 0] > 1e-9) & (radius[:, 0] > 1e-9)
+    out = middles.copy()
+    out[moved] = centre[moved] + smooth[moved] * (radius[moved] / norm[moved])
     return out
 
 
