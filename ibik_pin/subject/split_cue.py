@@ -80,16 +80,16 @@ class AxisDistanceCue:
 
     def set_views(self, cameras: Sequence[CameraLike], distances: Sequence[np.ndarray | None],
                   robust_scales_px: Sequence[float], clearances_px: Sequence[float]) -> None:
-        """One frame's views: per camera its axis_distance_image [px], robust scale c [px] and the
-        clearance [px] another segment keeps from a sample read. A view without any axis pixel (an
-        empty silhouette; None, or an image of +inf only) is left out."""
+        """One frame's views: per camera its axis_distance_image [px], or None for a view without
+        any centre-line pixel (an empty silhouette: left out), its robust scale c [px] and the
+        clearance [px] another segment keeps from a sample read."""
         if not len(cameras) == len(distances) == len(robust_scales_px) == len(clearances_px):
             raise InputError(f"expected one distance image, scale and clearance per camera ({len(cameras)}), got "
                              f"{len(distances)}, {len(robust_scales_px)} and {len(clearances_px)}")
         self._views = [(camera, np.asarray(distance), float(scale), float(clearance))
                        for camera, distance, scale, clearance in zip(cameras, distances, robust_scales_px,
                                                                      clearances_px, strict=True)
-                       if distance is not None and np.isfinite(distance).any()]
+                       if distance is not None]
         self.enabled = bool(self._views)
 
     def at_pose(self, positions: np.ndarray) -> None:
